@@ -1,0 +1,20 @@
+"""pacjax: differentiable statics of tendon-driven continuum robots (PCC, PAC and polynomial
+curvature) in JAX."""
+
+from . import _config as _config  # noqa: F401  (float64 by default)
+from ._loads import Gravity as Gravity
+from ._loads import PointForce as PointForce
+from ._loads import PointMass as PointMass
+from ._loads import PointMoment as PointMoment
+from ._robot import ExponentialStiffening as ExponentialStiffening
+from ._robot import Robot as Robot
+from ._robot import Segment as Segment
+from ._robot import StiffeningLaw as StiffeningLaw
+from ._scene import Scene as Scene
+from ._strain import PAC as PAC
+from ._strain import PCC as PCC
+from ._strain import PolynomialCurvature as PolynomialCurvature
+from ._strain import StrainModel as StrainModel
+from ._tendons import Tendon as Tendon
+
+__version__ = "0.1.0"

@@ -1,0 +1,194 @@
+"""The robot body: segments in series, their stiffness, mass and shape, and the base."""
+
+import abc
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float
+
+# Poisson's ratio of an incompressible elastomer: GJ = EI / (1 + nu) for a solid round section.
+_POISSON_RATIO = 0.5
+
+
+def as_float(x) -> Array:
+    """A parameter as a float array (float64 unless the value already is a float32 array)."""
+    if isinstance(x, (jnp.ndarray, np.ndarray)) and jnp.issubdtype(x.dtype, jnp.floating):
+        return jnp.asarray(x)
+    return jnp.asarray(x, dtype=float)
+
+
+def concrete(x) -> np.ndarray | None:
+    """``x`` as a numpy array when its value is known now (not a tracer), else None."""
+    try:
+        return np.asarray(x, dtype=float)
+    except Exception:  # a tracer inside jit / vmap: checks run before tracing instead
+        return None
+
+
+def check_positive(name: str, value, allow_zero: bool = False) -> None:
+    """Raise a ValueError naming ``name`` unless every entry of ``value`` is finite and > 0."""
+    v = concrete(value)
+    if v is None:
+        return
+    if not np.all(np.isfinite(v)):
+        raise ValueError(f"{name} must be finite, got {v}")
+    if allow_zero and np.any(v < 0):
+        raise ValueError(f"{name} must be >= 0, got {v}")
+    if not allow_zero and np.any(v <= 0):
+        raise ValueError(f"{name} must be > 0, got {v}")
+
+
+def check_finite(name: str, value) -> None:
+    v = concrete(value)
+    if v is not None and not np.all(np.isfinite(v)):
+        raise ValueError(f"{name} must be finite, got {v}")
+
+
+class StiffeningLaw(eqx.Module):
+    """Bending stiffness multiplier as a differentiable function of the elongation ``dL``."""
+
+    @abc.abstractmethod
+    def __call__(self, elongation: Float[Array, ""], length: Float[Array, ""]) -> Float[Array, ""]:
+        """Factor (> 0) on ``EI`` for elongation ``dL`` (m) of a segment of rest length (m)."""
+
+
+class ExponentialStiffening(StiffeningLaw):
+    """``EI(dL) = EI * exp(rate * (-dL / L))``: stiffer when contracted (``dL < 0``).
+
+    Smooth and positive for any ``dL``; ``rate = ln(k) / f`` makes the segment ``k`` times
+    stiffer at a contraction of a fraction ``f`` of its length.
+    """
+
+    rate: Float[Array, ""] = eqx.field(converter=as_float)
+
+    def __check_init__(self):
+        check_finite("ExponentialStiffening.rate", self.rate)
+
+    def __call__(self, elongation, length):
+        return jnp.exp(-self.rate * elongation / length)
+
+
+class Segment(eqx.Module):
+    """One segment of the robot. SI units.
+
+    Args:
+        length: rest length ``L`` (m).
+        bending_stiffness: ``EI`` (N m^2) at the segment's base; the elastic energy uses
+            ``k_b = EI / L`` on curvatures per unit ``s``.
+        axial_stiffness: ``k_a`` (N/m) on the elongation ``dL``.
+        torsion_stiffness: ``GJ`` (N m^2); default ``EI / (1 + nu)`` with ``nu = 0.5`` (solid
+            round section of an incompressible elastomer). PAC's ``k_phi`` is ``GJ / L``.
+        linear_density: mass per unit rest length (kg/m) at the base.
+        radius: outer radius (m) at the base (for plots, and the taper).
+        radius_tip: radius (m) at the tip for a tapered segment; then ``EI(s)`` scales with
+            ``r(s)^4`` and the density with ``r(s)^2``, ``r`` linear in ``s``. None: uniform.
+        stiffening: a :class:`StiffeningLaw` for ``EI`` against contraction; None: constant.
+    """
+
+    length: Float[Array, ""] = eqx.field(converter=as_float)
+    bending_stiffness: Float[Array, ""] = eqx.field(converter=as_float)
+    axial_stiffness: Float[Array, ""] = eqx.field(converter=as_float)
+    torsion_stiffness: Float[Array, ""] = eqx.field(converter=as_float, default=None)
+    linear_density: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    radius: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    radius_tip: Float[Array, ""] | None = None
+    stiffening: StiffeningLaw | None = None
+
+    def __init__(
+        self,
+        length,
+        bending_stiffness,
+        axial_stiffness,
+        torsion_stiffness=None,
+        linear_density=0.0,
+        radius=0.0,
+        radius_tip=None,
+        stiffening=None,
+    ):
+        self.length = length
+        self.bending_stiffness = bending_stiffness
+        self.axial_stiffness = axial_stiffness
+        if torsion_stiffness is None:
+            torsion_stiffness = as_float(bending_stiffness) / (1.0 + _POISSON_RATIO)
+        self.torsion_stiffness = torsion_stiffness
+        self.linear_density = linear_density
+        self.radius = radius
+        self.radius_tip = None if radius_tip is None else as_float(radius_tip)
+        self.stiffening = stiffening
+
+    def __check_init__(self):
+        check_positive("Segment.length", self.length)
+        check_positive("Segment.bending_stiffness", self.bending_stiffness)
+        check_positive("Segment.axial_stiffness", self.axial_stiffness)
+        check_positive("Segment.torsion_stiffness", self.torsion_stiffness)
+        check_positive("Segment.linear_density", self.linear_density, allow_zero=True)
+        check_positive("Segment.radius", self.radius, allow_zero=True)
+        if self.radius_tip is not None:
+            check_positive("Segment.radius_tip", self.radius_tip)
+            check_positive("Segment.radius (needed by radius_tip)", self.radius)
+        if self.stiffening is not None and not isinstance(self.stiffening, StiffeningLaw):
+            raise TypeError(f"Segment.stiffening must be a StiffeningLaw, got {self.stiffening!r}")
+
+    def radius_at(self, s: Float[Array, "*n"]) -> Float[Array, "*n"]:
+        """Outer radius (m) at ``s``."""
+        if self.radius_tip is None:
+            return self.radius * jnp.ones_like(s)
+        return self.radius + (self.radius_tip - self.radius) * s
+
+    def section_scale(self, s: Float[Array, "*n"]) -> Float[Array, "*n"] | None:
+        """``r(s) / r(0)`` for a tapered segment, None for a uniform one."""
+        if self.radius_tip is None:
+            return None
+        return self.radius_at(s) / self.radius
+
+
+class Robot(eqx.Module):
+    """Segments in series, clamped at a base frame.
+
+    Args:
+        segments: the segments from base (index 0) to tip.
+        base_rotation: (3, 3) rotation from the base frame to the world frame (default
+            identity: the robot's rest axis is the world's +z). A robot mounted horizontally or
+            hanging down is a base rotation; gravity and world forces stay in the world frame.
+        base_position: (3,) position (m) of the base in the world.
+    """
+
+    segments: tuple[Segment, ...]
+    base_rotation: Float[Array, "3 3"] = eqx.field(converter=as_float)
+    base_position: Float[Array, "3"] = eqx.field(converter=as_float)
+
+    def __init__(self, segments, base_rotation=None, base_position=None):
+        self.segments = tuple(segments)
+        self.base_rotation = np.eye(3) if base_rotation is None else base_rotation
+        self.base_position = np.zeros(3) if base_position is None else base_position
+
+    def __check_init__(self):
+        if len(self.segments) == 0:
+            raise ValueError("Robot.segments must hold at least one Segment")
+        for i, seg in enumerate(self.segments):
+            if not isinstance(seg, Segment):
+                raise TypeError(f"Robot.segments[{i}] must be a Segment, got {type(seg).__name__}")
+        if self.base_rotation.shape != (3, 3):
+            raise ValueError(f"Robot.base_rotation must have shape (3, 3), got {self.base_rotation.shape}")
+        if self.base_position.shape != (3,):
+            raise ValueError(f"Robot.base_position must have shape (3,), got {self.base_position.shape}")
+        r = concrete(self.base_rotation)
+        if r is not None and (
+            not np.all(np.isfinite(r)) or not np.allclose(r.T @ r, np.eye(3), atol=1e-6)
+            or np.linalg.det(r) < 0
+        ):
+            raise ValueError("Robot.base_rotation must be a proper rotation matrix (R^T R = I, det 1)")
+        check_finite("Robot.base_position", self.base_position)
+
+    @property
+    def n_segments(self) -> int:
+        return len(self.segments)
+
+    def stacked(self, name: str) -> Float[Array, " n"]:
+        """One per-segment parameter stacked over segments."""
+        return jnp.stack([getattr(seg, name) for seg in self.segments])
+
+    @property
+    def total_length(self) -> Float[Array, ""]:
+        return sum(seg.length for seg in self.segments)

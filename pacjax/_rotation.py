@@ -1,0 +1,55 @@
+"""Rotations: the hat map, the exponential map of SO(3), and elementary rotations.
+
+The exponential map is written so that its value and its first and second derivatives are exact
+at zero rotation (the straight robot): the kernels ``sin(t)/t`` and ``(1 - cos t)/t^2`` switch
+to their series in ``t^2`` below a small threshold, behind a double ``where`` so that the unused
+branch never produces a NaN gradient.
+"""
+
+import jax.numpy as jnp
+from jaxtyping import Array, Float
+
+# Below this squared angle the kernels use their series (4 terms: truncation error < 1e-18).
+_SERIES_THRESHOLD = 1e-3
+
+
+def hat(v: Float[Array, "3"]) -> Float[Array, "3 3"]:
+    """Skew-symmetric matrix ``[v]x`` with ``[v]x w = v x w``."""
+    x, y, z = v[0], v[1], v[2]
+    zero = jnp.zeros_like(x)
+    return jnp.stack(
+        [
+            jnp.stack([zero, -z, y]),
+            jnp.stack([z, zero, -x]),
+            jnp.stack([-y, x, zero]),
+        ]
+    )
+
+
+def _exp_kernels(theta_sq: Float[Array, ""]) -> tuple[Float[Array, ""], Float[Array, ""]]:
+    """``sin(t)/t`` and ``(1 - cos t)/t^2`` as functions of ``t^2``, smooth at 0."""
+    small = theta_sq < _SERIES_THRESHOLD
+    safe_sq = jnp.where(small, jnp.ones_like(theta_sq), theta_sq)
+    theta = jnp.sqrt(safe_sq)
+    half_sin = jnp.sin(0.5 * theta)
+    sinc = jnp.sin(theta) / theta
+    # 1 - cos t = 2 sin^2(t/2) avoids the cancellation that ruins float32 near 0.
+    cosc = 2.0 * half_sin * half_sin / safe_sq
+    t2 = theta_sq
+    sinc_series = 1.0 - t2 / 6.0 * (1.0 - t2 / 20.0 * (1.0 - t2 / 42.0))
+    cosc_series = 0.5 - t2 / 24.0 * (1.0 - t2 / 30.0 * (1.0 - t2 / 56.0))
+    return jnp.where(small, sinc_series, sinc), jnp.where(small, cosc_series, cosc)
+
+
+def exp_so3(omega: Float[Array, "3"]) -> Float[Array, "3 3"]:
+    """Rotation matrix ``exp([omega]x)`` (Rodrigues' formula)."""
+    a, b = _exp_kernels(jnp.dot(omega, omega))
+    w = hat(omega)
+    return jnp.eye(3, dtype=omega.dtype) + a * w + b * (w @ w)
+
+
+def rot_z(angle: Float[Array, ""]) -> Float[Array, "3 3"]:
+    """Rotation by ``angle`` (rad) about the z axis."""
+    c, s = jnp.cos(angle), jnp.sin(angle)
+    zero, one = jnp.zeros_like(c), jnp.ones_like(c)
+    return jnp.stack([jnp.stack([c, -s, zero]), jnp.stack([s, c, zero]), jnp.stack([zero, zero, one])])

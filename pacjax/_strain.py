@@ -1,0 +1,189 @@
+"""Strain models: the only thing in which PCC, PAC and polynomial curvature differ.
+
+A strain model maps the coordinates of one segment, ``q_i``, to
+
+- the body-frame strain ``u(s) = (u_x, u_y, u_z)`` per unit normalised arc length ``s``:
+  ``u_x, u_y`` are bending (rotation rates about the cross-section axes x and y), ``u_z`` is
+  twist; the frame obeys ``R'(s) = R(s) [u(s)]x``;
+- an optional rotation of the frame at ``s = 0`` (the paper's convention twists the frame by
+  ``phi`` at the base of a segment);
+- the elongation ``dL`` of the segment (always the last coordinate).
+
+Everything else (kinematics, energies, solvers) is shared. The *bending vector* ``(k_x, k_y)``
+points to where the backbone curves: a positive ``k_x`` bends the tip towards the cross-section's
++x axis, which is a rotation about +y, so ``u = (-k_y, k_x, twist)``.
+"""
+
+import abc
+
+import equinox as eqx
+import jax.numpy as jnp
+from jaxtyping import Array, Float
+
+from ._rotation import rot_z
+
+_FRAMES = ("torsion_free", "paper")
+
+
+class StrainModel(eqx.Module):
+    """Abstract strain model (one per scene, the same for every segment)."""
+
+    @abc.abstractmethod
+    def dofs_per_segment(self) -> int:
+        """Number of coordinates per segment."""
+
+    @abc.abstractmethod
+    def coordinate_names(self) -> tuple[str, ...]:
+        """Names of the coordinates of one segment, in order."""
+
+    @abc.abstractmethod
+    def strain(self, q: Float[Array, " d"], s: Float[Array, ""]) -> Float[Array, "3"]:
+        """Body-frame strain ``(u_x, u_y, u_z)`` (rad per unit ``s``) at ``s``."""
+
+    def base_rotation(self, q: Float[Array, " d"]) -> Float[Array, "3 3"] | None:
+        """Rotation of the segment frame at ``s = 0`` relative to the previous frame, or None."""
+        return None
+
+    def elongation(self, q: Float[Array, " d"]) -> Float[Array, ""]:
+        """Change of length ``dL`` (m) of the segment."""
+        return q[-1]
+
+    def coordinate_energy(
+        self, q: Float[Array, " d"], torsion_stiffness: Float[Array, ""]
+    ) -> Float[Array, ""] | None:
+        """Elastic energy on coordinates that are not a strain (PAC's ``phi``), or None.
+
+        ``torsion_stiffness`` is the segment's ``GJ / L`` (N m).
+        """
+        return None
+
+    def has_twist_strain(self) -> bool:
+        """Whether ``u_z`` can be non-zero (then the torsion energy is integrated)."""
+        return False
+
+    def exact_rotation_substeps(self) -> int:
+        """Magnus sub-steps per segment that integrate this model's rotation exactly (or well)."""
+        return 1
+
+    def bending_vector(self, q: Float[Array, " d"], s: Float[Array, ""]) -> Float[Array, "2"]:
+        """``(k_x, k_y)``: curvature per unit ``s`` towards the cross-section's x and y axes."""
+        u = self.strain(q, s)
+        return jnp.stack([u[1], -u[0]])
+
+
+def _check_frame(frame: str) -> None:
+    if frame not in _FRAMES:
+        raise ValueError(f"frame must be one of {_FRAMES}, got {frame!r}")
+
+
+class _PlanarCurvature(StrainModel):
+    """Curvature polynomial ``c(s)`` in a bending plane at angle ``phi``: PCC and PAC."""
+
+    frame: str = eqx.field(static=True, default="torsion_free")
+
+    def __check_init__(self):
+        _check_frame(self.frame)
+
+    @abc.abstractmethod
+    def _curvature(self, q: Float[Array, " d"], s: Float[Array, ""]) -> Float[Array, ""]: ...
+
+    def strain(self, q, s):
+        c = self._curvature(q, s)
+        zero = jnp.zeros_like(c)
+        if self.frame == "paper":
+            # R = Rz(phi) Ry(alpha): bending about the (already twisted) local y axis.
+            return jnp.stack([zero, c, zero])
+        phi = q[-2]
+        # R = Rz(phi) Ry(alpha) Rz(-phi): bending about the fixed axis (-sin phi, cos phi, 0).
+        return jnp.stack([-c * jnp.sin(phi), c * jnp.cos(phi), zero])
+
+    def base_rotation(self, q):
+        if self.frame == "paper":
+            return rot_z(q[-2])
+        return None
+
+    def coordinate_energy(self, q, torsion_stiffness):
+        # The paper's 1/2 k_phi phi^2 with k_phi = GJ / L. It also keeps the Hessian regular at
+        # zero curvature, where phi is undefined (SPEC section 5).
+        return 0.5 * torsion_stiffness * q[-2] ** 2
+
+
+class PCC(_PlanarCurvature):
+    """Piecewise constant curvature: ``q_i = [c0, phi, dL]``.
+
+    ``frame="torsion_free"`` (default) uses ``R = Rz(phi) Ry(alpha) Rz(-phi)``, which leaves a
+    straight segment untwisted; ``frame="paper"`` uses the paper's ``R = Rz(phi) Ry(alpha)``,
+    which twists the frame (and everything distal to it) by ``phi``.
+    """
+
+    def dofs_per_segment(self):
+        return 3
+
+    def coordinate_names(self):
+        return ("c0", "phi", "dL")
+
+    def _curvature(self, q, s):
+        return q[0] * jnp.ones_like(s)
+
+
+class PAC(_PlanarCurvature):
+    """Piecewise affine curvature (the paper): ``q_i = [c0, c1, phi, dL]``, ``c(s) = c0 + c1 s``.
+
+    The polar coordinates force the curvature to stay in one plane per segment and make ``phi``
+    undefined when ``c0 = c1 = 0``; :class:`PolynomialCurvature` with ``order=1`` is the
+    Cartesian form of the same curvature law without that singularity (and lets the plane turn).
+    See :class:`PCC` for ``frame``.
+    """
+
+    def dofs_per_segment(self):
+        return 4
+
+    def coordinate_names(self):
+        return ("c0", "c1", "phi", "dL")
+
+    def _curvature(self, q, s):
+        return q[0] + q[1] * s
+
+
+class PolynomialCurvature(StrainModel):
+    """Cartesian polynomial strain of order ``k``.
+
+    ``q_i = [kx_0..kx_k, ky_0..ky_k, dL]``, plus ``tw_0..tw_k`` before ``dL`` when
+    ``twist=True``; ``k_x(s) = sum_j kx_j s^j`` and likewise ``k_y`` and the twist. The bending
+    plane may turn along the segment, and there is no angle coordinate, hence no singularity at
+    the straight configuration. Prefer it to :class:`PAC` whenever the paper's exact
+    parametrisation is not the point (fitting, inverse statics, buckling).
+    """
+
+    order: int = eqx.field(static=True, default=3)
+    twist: bool = eqx.field(static=True, default=False)
+
+    def __check_init__(self):
+        if not isinstance(self.order, int) or self.order < 0:
+            raise ValueError(f"PolynomialCurvature order must be an integer >= 0, got {self.order!r}")
+
+    def dofs_per_segment(self):
+        return (3 if self.twist else 2) * (self.order + 1) + 1
+
+    def coordinate_names(self):
+        names = [f"kx_{j}" for j in range(self.order + 1)]
+        names += [f"ky_{j}" for j in range(self.order + 1)]
+        if self.twist:
+            names += [f"tw_{j}" for j in range(self.order + 1)]
+        return (*names, "dL")
+
+    def has_twist_strain(self):
+        return self.twist
+
+    def exact_rotation_substeps(self):
+        # The bending plane may turn, so the Magnus series does not truncate: sub-step.
+        return 4 if self.order >= 1 or self.twist else 1
+
+    def strain(self, q, s):
+        n = self.order + 1
+        # cumprod, not s ** arange: the derivative of s ** 0 is NaN at s = 0.
+        powers = jnp.cumprod(jnp.concatenate([jnp.ones(1, q.dtype), jnp.full(n - 1, s, q.dtype)]))
+        kx = jnp.dot(q[:n], powers)
+        ky = jnp.dot(q[n : 2 * n], powers)
+        tw = jnp.dot(q[2 * n : 3 * n], powers) if self.twist else jnp.zeros_like(kx)
+        return jnp.stack([-ky, kx, tw])

@@ -1,0 +1,199 @@
+"""Tendons: routing through guide rings, length, tension and energy.
+
+A tendon runs from its entry ring (the robot's base for a free tendon, the base of its own
+segment for one in a Bowden cable) through guide rings at fixed ``s`` values to its anchor. Its
+length is the sum of straight chords between consecutive guide points (frictionless pulleys).
+
+In length mode the motor holds the commanded length ``l_bar = l_rest - u`` with gain
+``kappa_P``: tension ``kappa_P max(l - l_bar, 0)`` and energy ``1/2 kappa_P max(l - l_bar, 0)^2``.
+The energy is C1 with a Lipschitz gradient, enough for the Newton-type solvers (the Hessian jumps
+where a tendon goes slack, which a line search handles). Tendons never push. In tension mode
+the control is the tension ``T >= 0`` (N) and the energy is ``T l``.
+"""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float
+
+from ._robot import as_float, check_finite, check_positive
+
+MODES = ("length", "tension")
+DEFAULT_GUIDES = tuple(np.linspace(0.0, 1.0, 11).tolist())
+
+
+class Tendon(eqx.Module):
+    """A tendon. SI units.
+
+    Args:
+        segment: index of the segment holding the anchor.
+        angle: angle (rad) of the tendon around the cross-section, from the x axis.
+        offset: radial distance (m) of the tendon from the backbone at its entry ring.
+        s: anchor position within ``segment``, in ``(0, 1]``.
+        offset_end: radial distance (m) at the anchor (a tapered body); linear along the route.
+            Default: ``offset``.
+        bowden: True when the tendon reaches its segment through a Bowden cable and acts on
+            that segment only; False when it runs through every proximal segment.
+        guides: ``s`` values of the guide rings in each segment it crosses (default: 11 evenly
+            spaced rings including both ends).
+        mode: ``"length"`` (motor holds a commanded length) or ``"tension"`` (control is a
+            tension in N).
+        gain: ``kappa_P`` (N/m), required in length mode.
+    """
+
+    segment: int = eqx.field(static=True)
+    angle: Float[Array, ""] = eqx.field(converter=as_float)
+    offset: Float[Array, ""] = eqx.field(converter=as_float)
+    s: float = eqx.field(static=True, default=1.0)
+    offset_end: Float[Array, ""] | None = None
+    bowden: bool = eqx.field(static=True, default=False)
+    guides: tuple[float, ...] = eqx.field(static=True, default=DEFAULT_GUIDES)
+    mode: str = eqx.field(static=True, default="length")
+    gain: Float[Array, ""] | None = None
+
+    def __init__(
+        self,
+        segment,
+        angle,
+        offset,
+        s=1.0,
+        offset_end=None,
+        bowden=False,
+        guides=None,
+        mode="length",
+        gain=None,
+    ):
+        if not isinstance(segment, (int, np.integer)) or isinstance(segment, bool):
+            raise TypeError(f"Tendon.segment must be an integer index, got {segment!r}")
+        self.segment = int(segment)
+        self.angle = angle
+        self.offset = offset
+        self.s = float(s)
+        self.offset_end = None if offset_end is None else as_float(offset_end)
+        self.bowden = bool(bowden)
+        self.guides = DEFAULT_GUIDES if guides is None else tuple(float(g) for g in guides)
+        self.mode = mode
+        self.gain = None if gain is None else as_float(gain)
+
+    def __check_init__(self):
+        if self.segment < 0:
+            raise ValueError(f"Tendon.segment must be >= 0, got {self.segment}")
+        if not 0.0 < self.s <= 1.0:
+            raise ValueError(f"Tendon.s (anchor) must lie in (0, 1], got {self.s}")
+        if not self.guides or any(not 0.0 <= g <= 1.0 for g in self.guides):
+            raise ValueError(f"Tendon.guides must be s values in [0, 1], got {self.guides}")
+        if self.mode not in MODES:
+            raise ValueError(f"Tendon.mode must be one of {MODES}, got {self.mode!r}")
+        check_finite("Tendon.angle", self.angle)
+        check_positive("Tendon.offset", self.offset, allow_zero=True)
+        if self.offset_end is not None:
+            check_positive("Tendon.offset_end", self.offset_end, allow_zero=True)
+        if self.mode == "length":
+            if self.gain is None:
+                raise ValueError("Tendon.gain (kappa_P, N/m) is required for a length-mode tendon")
+            check_positive("Tendon.gain", self.gain)
+
+    def route(self) -> list[tuple[int, float]]:
+        """Guide points ``(segment, s)`` from the entry ring to the anchor."""
+        start = self.segment if self.bowden else 0
+        points: list[tuple[int, float]] = []
+        for k in range(start, self.segment + 1):
+            ring_s = sorted(set(self.guides) | ({0.0} if k == start else set()))
+            if k == self.segment:
+                ring_s = [g for g in ring_s if g < self.s] + [self.s]
+            for g in ring_s:
+                # The ring at s = 1 of one segment is the ring at s = 0 of the next.
+                if points and g == 0.0 and points[-1] == (k - 1, 1.0):
+                    continue
+                points.append((k, g))
+        return points
+
+
+class TendonRouting:
+    """All tendons of a scene flattened into guide points and chords (static index arrays).
+
+    Built from the tendons' static routing only, so it is rebuilt cheaply at trace time.
+    """
+
+    def __init__(self, tendons):
+        segs, ss, ids, fracs, starts, chord_ids = [], [], [], [], [], []
+        for t_id, tendon in enumerate(tendons):
+            route = tendon.route()
+            # Offsets taper linearly in the route's normalised arc coordinate (segment + s).
+            coord = np.array([k + s for k, s in route])
+            frac = (coord - coord[0]) / (coord[-1] - coord[0])
+            first = len(segs)
+            for (k, s), f in zip(route, frac, strict=True):
+                segs.append(k)
+                ss.append(s)
+                ids.append(t_id)
+                fracs.append(f)
+            starts.extend(range(first, first + len(route) - 1))
+            chord_ids.extend([t_id] * (len(route) - 1))
+        self.point_segment = np.asarray(segs, np.int32)
+        self.point_s = np.asarray(ss, float)
+        self.point_tendon = np.asarray(ids, np.int32)
+        self.point_route_fraction = np.asarray(fracs, float)
+        self.chord_start = np.asarray(starts, np.int32)
+        self.chord_tendon = np.asarray(chord_ids, np.int32)
+        self.n_tendons = len(tendons)
+
+    def local_offsets(self, tendons, dtype) -> Float[Array, "p 3"]:
+        """Guide point offsets (m) in their cross-section frames."""
+        angle = jnp.stack([t.angle for t in tendons]).astype(dtype)[self.point_tendon]
+        start = jnp.stack([t.offset for t in tendons]).astype(dtype)
+        end = jnp.stack([t.offset if t.offset_end is None else t.offset_end for t in tendons])
+        frac = jnp.asarray(self.point_route_fraction, dtype)
+        radius = start[self.point_tendon] + (end.astype(dtype) - start)[self.point_tendon] * frac
+        return jnp.stack([radius * jnp.cos(angle), radius * jnp.sin(angle), jnp.zeros_like(angle)], -1)
+
+    def lengths(self, points: Float[Array, "p 3"]) -> Float[Array, " m"]:
+        """Tendon lengths (m) from guide point positions."""
+        chords = points[self.chord_start + 1] - points[self.chord_start]
+        # Consecutive guide points are distinct (segment lengths are > 0), so the norm is smooth.
+        chord_lengths = jnp.sqrt(jnp.sum(chords * chords, axis=-1))
+        return jax.ops.segment_sum(chord_lengths, self.chord_tendon, num_segments=self.n_tendons)
+
+    def rest_lengths(
+        self, tendons, segment_lengths: Float[Array, " n"]
+    ) -> Float[Array, " m"]:
+        """Tendon lengths (m) on the straight robot at rest (``q = 0``)."""
+        dtype = segment_lengths.dtype
+        offsets = self.local_offsets(tendons, dtype)
+        seg_start = jnp.concatenate([jnp.zeros(1, dtype), jnp.cumsum(segment_lengths)])
+        axial = seg_start[self.point_segment] + segment_lengths[self.point_segment] * self.point_s
+        points = offsets.at[:, 2].set(axial)
+        return self.lengths(points)
+
+
+def tendon_energy(
+    tendons, lengths: Float[Array, " m"], rest_lengths: Float[Array, " m"], controls
+) -> Float[Array, ""]:
+    """Potential energy (J) of the tendons and their motors."""
+    energy = jnp.zeros((), lengths.dtype)
+    length_ids = [i for i, t in enumerate(tendons) if t.mode == "length"]
+    tension_ids = [i for i, t in enumerate(tendons) if t.mode == "tension"]
+    if length_ids:
+        idx = np.asarray(length_ids)
+        gain = jnp.stack([tendons[i].gain for i in length_ids]).astype(lengths.dtype)
+        stretch = lengths[idx] - (rest_lengths[idx] - controls[idx])
+        energy = energy + 0.5 * jnp.sum(gain * jnp.maximum(stretch, 0.0) ** 2)
+    if tension_ids:
+        idx = np.asarray(tension_ids)
+        energy = energy + jnp.sum(controls[idx] * lengths[idx])
+    return energy
+
+
+def tendon_tensions(
+    tendons, lengths: Float[Array, " m"], rest_lengths: Float[Array, " m"], controls
+) -> Float[Array, " m"]:
+    """Tendon tensions (N): ``kappa_P max(l - l_bar, 0)`` in length mode, the control otherwise."""
+    out = []
+    for i, t in enumerate(tendons):
+        if t.mode == "length":
+            stretch = lengths[i] - (rest_lengths[i] - controls[i])
+            out.append(t.gain.astype(lengths.dtype) * jnp.maximum(stretch, 0.0))
+        else:
+            out.append(controls[i].astype(lengths.dtype))
+    return jnp.stack(out)
