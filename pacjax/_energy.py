@@ -60,7 +60,8 @@ def elastic_energy(
         )(stacked, q)
         return jnp.sum(per_segment)
     return sum(
-        segment_elastic_energy(model, seg, q[i], quadrature_points) for i, seg in enumerate(segments)
+        segment_elastic_energy(model, seg, q[i], quadrature_points)
+        for i, seg in enumerate(segments)
     )
 
 

@@ -36,18 +36,25 @@ class KinematicsConfig:
         self.rotation_substeps = rotation_substeps
 
 
+def _magnus_steps(model: StrainModel, q, s, substeps: int) -> list:
+    """Fourth-order Magnus rotation vectors of the sub-steps of ``[0, s]``."""
+    h = s / substeps
+    steps = []
+    for k in range(substeps):
+        a = k * h
+        u1 = model.strain(q, a + _C1 * h)
+        u2 = model.strain(q, a + _C2 * h)
+        steps.append(0.5 * h * (u1 + u2) + _MAGNUS_COMMUTATOR * h * h * jnp.cross(u1, u2))
+    return steps
+
+
 def local_rotation(
     model: StrainModel, q: Float[Array, " d"], s: Float[Array, ""], substeps: int
 ) -> Float[Array, "3 3"]:
     """Rotation of the frame at ``s`` relative to the segment's base frame."""
     base = model.base_rotation(q)
     rot = jnp.eye(3, dtype=q.dtype) if base is None else base
-    h = s / substeps
-    for k in range(substeps):
-        a = k * h
-        u1 = model.strain(q, a + _C1 * h)
-        u2 = model.strain(q, a + _C2 * h)
-        omega = 0.5 * h * (u1 + u2) + _MAGNUS_COMMUTATOR * h * h * jnp.cross(u1, u2)
+    for omega in _magnus_steps(model, q, s, substeps):
         rot = rot @ exp_so3(omega)
     return rot
 
@@ -61,38 +68,13 @@ def local_frame(
 ) -> tuple[Float[Array, "3 3"], Float[Array, "3"]]:
     """Rotation and position (m) of the frame at ``s`` in the segment's base frame."""
     nodes, weights = gauss_legendre(config.quadrature_points)
-    nodes = jnp.asarray(nodes, q.dtype)
-    weights = jnp.asarray(weights, q.dtype)
-    substeps = config.rotation_substeps
-
-    def tangent(v):
-        return local_rotation(model, q, v, substeps)[:, 2]
-
-    tangents = jax.vmap(tangent)(s * nodes)
-    position = (length + model.elongation(q)) * s * (weights @ tangents)
-    return local_rotation(model, q, s, substeps), position
-
-
-def base_frames(
-    model: StrainModel,
-    q: Float[Array, "n d"],
-    lengths: Float[Array, " n"],
-    base_rotation: Float[Array, "3 3"],
-    base_position: Float[Array, "3"],
-    config: KinematicsConfig,
-) -> tuple[Float[Array, "n 3 3"], Float[Array, "n 3"]]:
-    """World frame at the base (``s = 0``) of every segment."""
-    one = jnp.ones((), q.dtype)
-    end_rot, end_pos = jax.vmap(lambda qi, li: local_frame(model, qi, li, one, config))(q, lengths)
-
-    def chain(carry, end):
-        rot, pos = carry
-        d_rot, d_pos = end
-        return (rot @ d_rot, pos + rot @ d_pos), (rot, pos)
-
-    start = (base_rotation.astype(q.dtype), base_position.astype(q.dtype))
-    _, (rots, positions) = jax.lax.scan(chain, start, (end_rot, end_pos))
-    return rots, positions
+    # The frame at s and at the quadrature nodes of [0, s] in one vmapped evaluation, so the
+    # rotation is traced once (compile time scales with the size of the traced graph).
+    where = jnp.concatenate([s * jnp.asarray(nodes, q.dtype), s[None]])
+    rots = jax.vmap(lambda v: local_rotation(model, q, v, config.rotation_substeps))(where)
+    tangents = rots[:-1, :, 2]
+    position = (length + model.elongation(q)) * s * (jnp.asarray(weights, q.dtype) @ tangents)
+    return rots[-1], position
 
 
 def frames_at(
@@ -105,12 +87,24 @@ def frames_at(
     s: Float[Array, " p"],
     config: KinematicsConfig,
 ) -> tuple[Float[Array, "p 3 3"], Float[Array, "p 3"]]:
-    """World rotations and positions (m) of the frames at points ``(segment[k], s[k])``."""
-    rots, positions = base_frames(model, q, lengths, base_rotation, base_position, config)
-    s = jnp.asarray(s, q.dtype)
+    """World rotations and positions (m) of the frames at points ``(segment[k], s[k])``.
 
-    def one(k, sk):
-        rot, pos = local_frame(model, q[k], lengths[k], sk, config)
-        return rots[k] @ rot, positions[k] + rots[k] @ pos
+    The segment end frames are evaluated in the same batch as the requested points, then
+    chained by a scan over segments.
+    """
+    n = q.shape[0]
+    all_segments = jnp.concatenate([jnp.arange(n, dtype=segment.dtype), segment])
+    all_s = jnp.concatenate([jnp.ones(n, q.dtype), jnp.asarray(s, q.dtype)])
+    rot, pos = jax.vmap(lambda k, sk: local_frame(model, q[k], lengths[k], sk, config))(
+        all_segments, all_s
+    )
 
-    return jax.vmap(one)(segment, s)
+    def chain(carry, end):
+        r, p = carry
+        d_rot, d_pos = end
+        return (r @ d_rot, p + r @ d_pos), (r, p)
+
+    start = (base_rotation.astype(q.dtype), base_position.astype(q.dtype))
+    _, (base_rots, base_pos) = jax.lax.scan(chain, start, (rot[:n], pos[:n]))
+    r_base, p_base = base_rots[segment], base_pos[segment]
+    return r_base @ rot[n:], p_base + jnp.einsum("pij,pj->pi", r_base, pos[n:])

@@ -170,15 +170,22 @@ class Robot(eqx.Module):
             if not isinstance(seg, Segment):
                 raise TypeError(f"Robot.segments[{i}] must be a Segment, got {type(seg).__name__}")
         if self.base_rotation.shape != (3, 3):
-            raise ValueError(f"Robot.base_rotation must have shape (3, 3), got {self.base_rotation.shape}")
+            raise ValueError(
+                f"Robot.base_rotation must have shape (3, 3), got {self.base_rotation.shape}"
+            )
         if self.base_position.shape != (3,):
-            raise ValueError(f"Robot.base_position must have shape (3,), got {self.base_position.shape}")
+            raise ValueError(
+                f"Robot.base_position must have shape (3,), got {self.base_position.shape}"
+            )
         r = concrete(self.base_rotation)
         if r is not None and (
-            not np.all(np.isfinite(r)) or not np.allclose(r.T @ r, np.eye(3), atol=1e-6)
+            not np.all(np.isfinite(r))
+            or not np.allclose(r.T @ r, np.eye(3), atol=1e-6)
             or np.linalg.det(r) < 0
         ):
-            raise ValueError("Robot.base_rotation must be a proper rotation matrix (R^T R = I, det 1)")
+            raise ValueError(
+                "Robot.base_rotation must be a proper rotation matrix (R^T R = I, det 1)"
+            )
         check_finite("Robot.base_position", self.base_position)
 
     @property

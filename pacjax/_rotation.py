@@ -41,15 +41,41 @@ def _exp_kernels(theta_sq: Float[Array, ""]) -> tuple[Float[Array, ""], Float[Ar
     return jnp.where(small, sinc_series, sinc), jnp.where(small, cosc_series, cosc)
 
 
+def _cross(a, b):
+    # Written out: jnp.cross lowers to slices and concatenations that XLA:CPU fuses poorly.
+    return (
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    )
+
+
 def exp_so3(omega: Float[Array, "3"]) -> Float[Array, "3 3"]:
     """Rotation matrix ``exp([omega]x)`` (Rodrigues' formula)."""
-    a, b = _exp_kernels(jnp.dot(omega, omega))
-    w = hat(omega)
-    return jnp.eye(3, dtype=omega.dtype) + a * w + b * (w @ w)
+    x, y, z = omega[0], omega[1], omega[2]
+    a, b = _exp_kernels(x * x + y * y + z * z)
+    bx, by, bz = b * x, b * y, b * z
+    return jnp.stack(
+        [
+            jnp.stack([1.0 - by * y - bz * z, bx * y - a * z, bx * z + a * y]),
+            jnp.stack([bx * y + a * z, 1.0 - bx * x - bz * z, by * z - a * x]),
+            jnp.stack([bx * z - a * y, by * z + a * x, 1.0 - bx * x - by * y]),
+        ]
+    )
 
 
 def rot_z(angle: Float[Array, ""]) -> Float[Array, "3 3"]:
     """Rotation by ``angle`` (rad) about the z axis."""
     c, s = jnp.cos(angle), jnp.sin(angle)
     zero, one = jnp.zeros_like(c), jnp.ones_like(c)
-    return jnp.stack([jnp.stack([c, -s, zero]), jnp.stack([s, c, zero]), jnp.stack([zero, zero, one])])
+    return jnp.stack(
+        [jnp.stack([c, -s, zero]), jnp.stack([s, c, zero]), jnp.stack([zero, zero, one])]
+    )
+
+
+def rotate(omega: Float[Array, "3"], v: Float[Array, "3"]) -> Float[Array, "3"]:
+    """``exp([omega]x) v`` without forming the matrix."""
+    a, b = _exp_kernels(omega[0] ** 2 + omega[1] ** 2 + omega[2] ** 2)
+    w = _cross(omega, v)
+    ww = _cross(omega, w)
+    return jnp.stack([v[k] + a * w[k] + b * ww[k] for k in range(3)])

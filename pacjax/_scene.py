@@ -27,10 +27,14 @@ def normalise_sites(sites, n_segments: int, owner: str = "sites") -> tuple:
     out = []
     for i, site in enumerate(sites):
         if not isinstance(site, (tuple, list)) or len(site) not in (2, 3):
-            raise ValueError(f"{owner}[{i}] must be (segment, s) or (segment, s, offset_xyz), got {site!r}")
+            raise ValueError(
+                f"{owner}[{i}] must be (segment, s) or (segment, s, offset_xyz), got {site!r}"
+            )
         seg, s = site[0], site[1]
         if not isinstance(seg, (int, np.integer)) or not 0 <= seg < n_segments:
-            raise ValueError(f"{owner}[{i}]: segment {seg!r} does not exist (robot has {n_segments})")
+            raise ValueError(
+                f"{owner}[{i}]: segment {seg!r} does not exist (robot has {n_segments})"
+            )
         if not (np.isfinite(s) and 0.0 <= s <= 1.0):
             raise ValueError(f"{owner}[{i}]: s must lie in [0, 1], got {s}")
         offset = tuple(float(v) for v in site[2]) if len(site) == 3 else (0.0, 0.0, 0.0)
@@ -245,7 +249,9 @@ class Scene(eqx.Module):
         if gravity is not None:
             accel = gravity.acceleration.astype(dtype)
             if point_masses:
-                masses = jnp.concatenate([masses, jnp.stack([pm.mass for pm in point_masses]).astype(dtype)])
+                masses = jnp.concatenate(
+                    [masses, jnp.stack([pm.mass for pm in point_masses]).astype(dtype)]
+                )
             energy = energy - jnp.sum(masses * (pos[: len(masses)] @ accel))
         if routing is not None:
             sl = slice(tendon_start, tendon_start + len(routing.point_s))

@@ -80,9 +80,25 @@ class _PlanarCurvature(StrainModel):
     """Curvature polynomial ``c(s)`` in a bending plane at angle ``phi``: PCC and PAC."""
 
     frame: str = eqx.field(static=True, default="torsion_free")
+    phi_stiffness: float | None = eqx.field(static=True, default=None)
 
     def __check_init__(self):
         _check_frame(self.frame)
+        if self.phi_stiffness is not None and not self.phi_stiffness >= 0:
+            raise ValueError(f"phi_stiffness must be >= 0, got {self.phi_stiffness}")
+
+    def phi_stiffness_factor(self) -> float:
+        """Factor on ``GJ / L`` giving the stiffness on ``phi``.
+
+        With ``frame="paper"`` the frame is twisted by ``phi``: a real torsion, factor 1 (the
+        paper's ``k_torsion``). With the torsion-free frame ``phi`` is only the direction of the
+        bending plane; its stiffness is a regulariser (default 1e-3) that keeps the Hessian
+        regular at zero curvature, where ``phi`` is undefined, while biasing the plane of a bent
+        segment by a relative amount of that order.
+        """
+        if self.phi_stiffness is not None:
+            return self.phi_stiffness
+        return 1.0 if self.frame == "paper" else 1e-3
 
     @abc.abstractmethod
     def _curvature(self, q: Float[Array, " d"], s: Float[Array, ""]) -> Float[Array, ""]: ...
@@ -103,9 +119,9 @@ class _PlanarCurvature(StrainModel):
         return None
 
     def coordinate_energy(self, q, torsion_stiffness):
-        # The paper's 1/2 k_phi phi^2 with k_phi = GJ / L. It also keeps the Hessian regular at
-        # zero curvature, where phi is undefined (SPEC section 5).
-        return 0.5 * torsion_stiffness * q[-2] ** 2
+        # The paper's 1/2 k_phi phi^2 with k_phi = GJ / L (times phi_stiffness_factor). It also
+        # keeps the Hessian regular at zero curvature, where phi is undefined.
+        return 0.5 * self.phi_stiffness_factor() * torsion_stiffness * q[-2] ** 2
 
 
 class PCC(_PlanarCurvature):
@@ -113,7 +129,9 @@ class PCC(_PlanarCurvature):
 
     ``frame="torsion_free"`` (default) uses ``R = Rz(phi) Ry(alpha) Rz(-phi)``, which leaves a
     straight segment untwisted; ``frame="paper"`` uses the paper's ``R = Rz(phi) Ry(alpha)``,
-    which twists the frame (and everything distal to it) by ``phi``.
+    which twists the frame (and everything distal to it, tendon holes included) by ``phi``.
+    ``phi_stiffness``: factor on ``GJ / L`` for the stiffness on ``phi`` (see
+    :meth:`phi_stiffness_factor`).
     """
 
     def dofs_per_segment(self):
@@ -160,7 +178,9 @@ class PolynomialCurvature(StrainModel):
 
     def __check_init__(self):
         if not isinstance(self.order, int) or self.order < 0:
-            raise ValueError(f"PolynomialCurvature order must be an integer >= 0, got {self.order!r}")
+            raise ValueError(
+                f"PolynomialCurvature order must be an integer >= 0, got {self.order!r}"
+            )
 
     def dofs_per_segment(self):
         return (3 if self.twist else 2) * (self.order + 1) + 1

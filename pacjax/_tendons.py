@@ -146,7 +146,9 @@ class TendonRouting:
         end = jnp.stack([t.offset if t.offset_end is None else t.offset_end for t in tendons])
         frac = jnp.asarray(self.point_route_fraction, dtype)
         radius = start[self.point_tendon] + (end.astype(dtype) - start)[self.point_tendon] * frac
-        return jnp.stack([radius * jnp.cos(angle), radius * jnp.sin(angle), jnp.zeros_like(angle)], -1)
+        return jnp.stack(
+            [radius * jnp.cos(angle), radius * jnp.sin(angle), jnp.zeros_like(angle)], -1
+        )
 
     def lengths(self, points: Float[Array, "p 3"]) -> Float[Array, " m"]:
         """Tendon lengths (m) from guide point positions."""
@@ -155,9 +157,7 @@ class TendonRouting:
         chord_lengths = jnp.sqrt(jnp.sum(chords * chords, axis=-1))
         return jax.ops.segment_sum(chord_lengths, self.chord_tendon, num_segments=self.n_tendons)
 
-    def rest_lengths(
-        self, tendons, segment_lengths: Float[Array, " n"]
-    ) -> Float[Array, " m"]:
+    def rest_lengths(self, tendons, segment_lengths: Float[Array, " n"]) -> Float[Array, " m"]:
         """Tendon lengths (m) on the straight robot at rest (``q = 0``)."""
         dtype = segment_lengths.dtype
         offsets = self.local_offsets(tendons, dtype)

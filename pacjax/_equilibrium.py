@@ -1,0 +1,262 @@
+"""Static equilibrium: continuation of the damped flow to a steady state, with stability.
+
+The paper finds equilibria by integrating the damped flow ``D qdot = -F(q)`` to a steady state.
+That flow is stiff (tendon gains against a soft body): an explicit integrator needs tens of
+thousands of steps. pacjax integrates it with linearised implicit Euler steps whose size grows as
+the residual falls (pseudo-transient continuation, :mod:`pacjax._ptc`): far from equilibrium the
+steps follow the flow, near it they are Newton steps with the exact Jacobian, so the last steps
+*are* the Newton polish. ``D`` is the diagonal of the elastic stiffness, so the flow is well
+scaled. The loop runs inside ``optimistix.root_find`` with the implicit adjoint, so derivatives of
+the equilibrium with respect to any scene parameter or control come from the implicit function
+theorem (one linear solve), never from differentiating the iterations.
+
+``method="flow"`` first integrates the preconditioned flow with ``diffrax`` (an adaptive implicit
+Runge-Kutta method, stopped by a steady-state event) and then continues from there: slower, and
+the automatic fallback when continuation from the given start fails.
+
+An equilibrium that is a saddle (a column past buckling; PAC's straight state where ``phi`` is
+undefined) is detected from the smallest eigenvalue of the scaled stiffness and, by default, left
+along its direction of negative curvature.
+"""
+
+import diffrax
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import jax.tree_util as jtu
+import lineax as lx
+import numpy as np
+import optimistix as optx
+
+from ._ptc import PseudoTransientContinuation, final_code, max_abs
+from ._scene import Scene
+from ._solution import Equilibrium
+
+
+class SolverOptions(eqx.Module):
+    """Static solver settings (changing one recompiles).
+
+    Args:
+        tol: tolerance on the scaled residual (see :class:`Equilibrium`).
+        max_steps: maximum continuation steps (per escape attempt).
+        initial_dt: first pseudo-time step, in units of the elastic relaxation time.
+        max_dt: largest pseudo-time step (Newton beyond it).
+        escapes: how many times a converged saddle is left along its negative-curvature
+            direction and continued again (0: report saddles as they are).
+        escape_size: size of that perturbation (rad of curvature).
+        stability_tol: threshold on the smallest scaled eigenvalue for ``stable``.
+        method: ``"ptc"`` (continuation, default) or ``"flow"`` (diffrax).
+        flow_solver: diffrax solver of the flow method.
+    """
+
+    tol: float = eqx.field(static=True, default=1e-10)
+    max_steps: int = eqx.field(static=True, default=100)
+    initial_dt: float = eqx.field(static=True, default=1.0)
+    max_dt: float = eqx.field(static=True, default=1e12)
+    escapes: int = eqx.field(static=True, default=2)
+    escape_size: float = eqx.field(static=True, default=0.05)
+    stability_tol: float | None = eqx.field(static=True, default=None)
+    method: str = eqx.field(static=True, default="ptc")
+    flow_solver: diffrax.AbstractSolver = eqx.field(static=True, default=diffrax.Kvaerno5())
+
+    def __check_init__(self):
+        if self.method not in ("ptc", "flow"):
+            raise ValueError(f"method must be 'ptc' or 'flow', got {self.method!r}")
+        if not self.tol > 0:
+            raise ValueError(f"tol must be > 0, got {self.tol}")
+        if self.max_steps < 1:
+            raise ValueError(f"max_steps must be >= 1, got {self.max_steps}")
+        if self.escapes < 0:
+            raise ValueError(f"escapes must be >= 0, got {self.escapes}")
+
+
+class _Scaled(eqx.Module):
+    """The equilibrium problem in scaled coordinates ``y = q / sigma``.
+
+    The residual ``r(y) = F(sigma y) / (d sigma)`` is dimensionless (``d`` the diagonal of the
+    elastic stiffness); ``D = diag(d)`` is the damping of the flow.
+    """
+
+    scene: Scene
+    controls: jax.Array
+    sigma: jax.Array
+    row: jax.Array
+
+    @staticmethod
+    def build(scene: Scene, controls: jax.Array) -> "_Scaled":
+        dtype = controls.dtype
+        sigma = jax.lax.stop_gradient(scene.coordinate_scale(dtype))
+        d = jax.lax.stop_gradient(scene.elastic_stiffness_diagonal(dtype))
+        return _Scaled(scene, controls, sigma, 1.0 / (d * sigma))
+
+    def q(self, y):
+        return self.sigma * y
+
+    def residual(self, y):
+        return self.scene.residual(self.q(y), self.controls) * self.row
+
+    def residual_and_merit(self, y):
+        """Scaled residual and the merit that a step must not raise (energy or residual)."""
+        q = self.q(y)
+        if self.scene.is_conservative:
+            energy, grad = jax.value_and_grad(self.scene.potential_energy)(q, self.controls)
+            return grad * self.row, energy
+        r = self.scene.residual(q, self.controls) * self.row
+        return r, 0.5 * jnp.sum(r * r)
+
+    def weights(self):
+        """``sqrt(d) sigma``: maps scaled coordinates to ``D^1/2``-weighted ones."""
+        return jnp.sqrt(self.sigma / self.row)
+
+    @staticmethod
+    def root_fn(y, args: "_Scaled"):
+        """``(r, (merit, weights))`` for :class:`PseudoTransientContinuation`."""
+        r, merit = args.residual_and_merit(y)
+        return r, (merit, args.weights())
+
+
+def _flow_start(problem: _Scaled, y0, opts: SolverOptions):
+    """Integrate the preconditioned flow ``dy/dt = -r(y)`` with diffrax towards a steady state."""
+    term = diffrax.ODETerm(lambda t, y, args: -problem.residual(y))
+    sol = diffrax.diffeqsolve(
+        term,
+        opts.flow_solver,
+        t0=0.0,
+        t1=jnp.inf,
+        dt0=None,
+        y0=y0,
+        stepsize_controller=diffrax.PIDController(rtol=1e-6, atol=1e-9),
+        event=diffrax.Event(diffrax.steady_state_event(rtol=0.0, atol=opts.tol * 100)),
+        max_steps=opts.max_steps * 100,
+        throw=False,
+    )
+    return sol.ys[-1], sol.stats["num_steps"]
+
+
+def _stability_tol(opts, dtype):
+    return (
+        opts.stability_tol if opts.stability_tol is not None else 1e3 * float(jnp.finfo(dtype).eps)
+    )
+
+
+@eqx.filter_jit
+def _solve(scene: Scene, controls, q0, opts: SolverOptions) -> Equilibrium:
+    problem = _Scaled.build(scene, controls)
+    frozen = jax.lax.stop_gradient(problem)
+    y0 = jax.lax.stop_gradient(q0) / frozen.sigma
+    flow_steps = jnp.asarray(0)
+    if opts.method == "flow":
+        y0, flow_steps = _flow_start(frozen, y0, opts)
+    solver = PseudoTransientContinuation(
+        rtol=0.0,
+        atol=opts.tol,
+        initial_dt=opts.initial_dt,
+        max_dt=opts.max_dt,
+        escapes=opts.escapes,
+        escape_size=opts.escape_size,
+        stability_tol=_stability_tol(opts, q0.dtype),
+    )
+    sol = optx.root_find(
+        _Scaled.root_fn,
+        solver,
+        y0,
+        args=problem,
+        has_aux=True,
+        max_steps=opts.max_steps * (1 + opts.escapes),
+        throw=False,
+        adjoint=optx.ImplicitAdjoint(linear_solver=lx.LU()),
+    )
+    state = sol.state
+    residual_norm = max_abs(state.residual)
+    converged = residual_norm <= opts.tol
+    energy = state.merit if scene.is_conservative else jnp.asarray(jnp.nan, state.merit.dtype)
+    return Equilibrium(
+        q=frozen.sigma * sol.value,
+        converged=converged,
+        residual_norm=residual_norm,
+        stable=state.eig > -solver.stability_tol,
+        min_hessian_eigenvalue=state.eig,
+        steps=sol.stats["num_steps"] + flow_steps,
+        result=final_code(state, converged),
+        energy=energy,
+    )
+
+
+def check_controls(scene: Scene, controls, dtype) -> jax.Array:
+    """Validate controls against the scene (before any compilation)."""
+    if controls is None:
+        return scene.default_controls(dtype)
+    arr = np.asarray(controls, dtype=float) if not isinstance(controls, jax.core.Tracer) else None
+    shape = jnp.shape(controls)
+    if shape[-1:] != (scene.n_tendons,) and not (scene.n_tendons == 0 and shape[-1:] == (0,)):
+        raise ValueError(
+            f"controls must have shape (..., {scene.n_tendons}) (one per tendon), got {shape}"
+        )
+    if arr is not None:
+        if not np.all(np.isfinite(arr)):
+            raise ValueError("controls contain NaN or infinite values")
+        for i, t in enumerate(scene.tendons):
+            if t.mode == "tension" and np.any(arr[..., i] < 0):
+                raise ValueError(
+                    f"controls[{i}] is a tension and must be >= 0 (tendons never push)"
+                )
+    return jnp.asarray(controls, dtype)
+
+
+def check_q(scene: Scene, q, dtype) -> jax.Array:
+    if q is None:
+        return scene.zeros(dtype)
+    shape = jnp.shape(q)
+    if shape[-1:] != (scene.n_dofs,):
+        raise ValueError(f"q0 must have shape (..., {scene.n_dofs}), got {shape}")
+    if not isinstance(q, jax.core.Tracer) and not np.all(np.isfinite(np.asarray(q, float))):
+        raise ValueError("q0 contains NaN or infinite values")
+    return jnp.asarray(q, dtype)
+
+
+def solver_dtype(scene: Scene):
+    """The floating dtype the scene's parameters are stored in."""
+    leaves = [x for x in jtu.tree_leaves(scene) if eqx.is_inexact_array(x)]
+    return leaves[0].dtype if leaves else jnp.float64
+
+
+def solve_equilibrium(
+    scene: Scene, controls=None, q0=None, *, fallback: bool = True, **options
+) -> Equilibrium:
+    """Static equilibrium of ``scene`` under ``controls`` (one per tendon), starting from ``q0``.
+
+    Args:
+        scene: the :class:`Scene`.
+        controls: (n_tendons,) pull-in (m) for length-mode tendons, tension (N) for tension-mode
+            ones; default zeros.
+        q0: starting configuration (default straight).
+        fallback: when continuation fails, retry with the diffrax flow (outside jit, compiled
+            only when needed).
+        **options: :class:`SolverOptions` fields (``tol``, ``max_steps``, ``escapes``, ...).
+
+    Returns:
+        An :class:`Equilibrium`. Differentiable with respect to the scene's parameters and the
+        controls (implicit function theorem); ``jit``/``vmap`` compatible.
+    """
+    if not isinstance(scene, Scene):
+        raise TypeError(f"scene must be a pacjax.Scene, got {type(scene).__name__}")
+    opts = SolverOptions(**options)
+    dtype = solver_dtype(scene)
+    controls = check_controls(scene, controls, dtype)
+    q0 = check_q(scene, q0, dtype)
+    eq = _solve(scene, controls, q0, opts)
+    if fallback and opts.method == "ptc" and not _is_traced(eq.converged):
+        if not bool(np.all(eq.converged)):
+            retry = _solve(scene, controls, q0, eqx.tree_at(lambda o: o.method, opts, "flow"))
+            better = np.asarray(retry.converged) & ~np.asarray(eq.converged)
+            if np.any(better):
+                eq = jtu.tree_map(lambda a, b: jnp.where(_bcast(better, a), a, b), retry, eq)
+    return eq
+
+
+def _bcast(mask, x):
+    return mask.reshape(mask.shape + (1,) * (x.ndim - mask.ndim))
+
+
+def _is_traced(x) -> bool:
+    return isinstance(x, jax.core.Tracer)

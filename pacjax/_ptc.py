@@ -1,0 +1,193 @@
+"""Pseudo-transient continuation as an optimistix root finder.
+
+It integrates the damped flow ``D qdot = -F(q)`` with linearised implicit Euler steps
+``(I / dt + dr/dy) dy = -r`` in scaled coordinates (``r = F / (d sigma)``, ``y = q / sigma``,
+``d`` the diagonal of the elastic stiffness). The pseudo-time step ``dt`` grows with the fall of
+the residual (switched evolution relaxation), so the steps become Newton steps near the
+solution; a step that raises the merit (the energy for conservative scenes, ``|r|^2`` otherwise)
+is rejected and ``dt`` shrinks until the step is a short stretch of the flow, which is a descent
+direction whatever the curvature. A converged saddle (smallest eigenvalue of the scaled stiffness
+below ``-stability_tol``) is left along its negative-curvature direction, a bounded number of
+times.
+
+Written as an ``optimistix.AbstractRootFinder`` so that ``optimistix.root_find`` runs the loop and
+provides the implicit-function-theorem adjoint: the Hessian graph is traced once.
+"""
+
+from typing import Any
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import optimistix as optx
+from jaxtyping import Array, Bool, Float, Int
+
+from ._solution import MAX_STEPS, NONFINITE, STALLED, SUCCESS
+
+_MIN_DT = 1e-10
+_MIN_ALPHA = 1.0 / 256
+
+
+class PTCState(eqx.Module):
+    residual: Float[Array, " n"]
+    merit: Float[Array, ""]
+    jacobian: Float[Array, "n n"]
+    weights: Float[Array, " n"]
+    dt: Float[Array, ""]
+    step: Int[Array, ""]
+    escapes: Int[Array, ""]
+    eig: Float[Array, ""]
+    escape_dy: Float[Array, " n"]
+    code: Int[Array, ""]
+
+
+def max_abs(x):
+    return jnp.max(jnp.abs(x))
+
+
+def lowest_mode(jac, weights, size):
+    """Smallest eigenvalue of ``diag(w) J diag(1/w)`` symmetrised, and a ``y`` step along it.
+
+    With ``w = sqrt(d) sigma`` this matrix is ``D^-1/2 (dF/dq) D^-1/2``: the stiffness relative
+    to the elastic stiffness, whose eigenvalue signs are those of the Hessian.
+    """
+    k = (weights[:, None] * jac) / weights[None, :]
+    eigvals, eigvecs = jnp.linalg.eigh(0.5 * (k + k.T))
+    dy = eigvecs[:, 0] / weights
+    dy = size * dy / jnp.maximum(max_abs(dy), jnp.finfo(dy.dtype).tiny)
+    return eigvals[0], dy
+
+
+class PseudoTransientContinuation(optx.AbstractRootFinder):
+    """Root finder for ``fn(y, args) -> (r, (merit, weights))``; see the module docstring."""
+
+    rtol: float
+    atol: float
+    norm: Any = max_abs
+    initial_dt: float = 1.0
+    max_dt: float = 1e12
+    escapes: int = 2
+    escape_size: float = 0.05
+    stability_tol: float = 1e-12
+
+    def init(self, fn, y, args, options, f_struct, aux_struct, tags):
+        del fn, args, options, aux_struct, tags
+        n = y.shape[0]
+        dtype = y.dtype
+        return PTCState(
+            residual=jnp.full(f_struct.shape, jnp.inf, dtype),
+            merit=jnp.asarray(jnp.inf, dtype),
+            jacobian=jnp.eye(n, dtype=dtype),
+            weights=jnp.ones(n, dtype),
+            dt=jnp.asarray(self.initial_dt, dtype),
+            step=jnp.asarray(0),
+            escapes=jnp.asarray(0),
+            eig=jnp.asarray(0.0, dtype),
+            escape_dy=jnp.zeros(n, dtype),
+            code=jnp.asarray(SUCCESS),
+        )
+
+    def _converged(self, r) -> Bool[Array, ""]:
+        return max_abs(r) <= self.atol
+
+    def _wants_escape(self, state: PTCState) -> Bool[Array, ""]:
+        return (
+            self._converged(state.residual)
+            & (state.eig < -self.stability_tol)
+            & (state.escapes < self.escapes)
+        )
+
+    def step(self, fn, y, args, options, state: PTCState, tags):
+        del options, tags
+        dtype = y.dtype
+        eye = jnp.eye(y.shape[0], dtype=dtype)
+        eps = jnp.finfo(dtype).eps
+        first = state.step == 0
+        escape = self._wants_escape(state) & ~first
+        newton = jnp.linalg.solve(state.jacobian + eye / state.dt, -state.residual)
+        delta = jnp.where(first, 0.0, jnp.where(escape, state.escape_dy, newton))
+
+        def acceptable(r, merit):
+            finite = jnp.all(jnp.isfinite(r)) & jnp.isfinite(merit)
+            slack = 64 * eps * (jnp.abs(state.merit) + jnp.abs(merit))
+            return finite & ((merit <= state.merit + slack) | self._converged(r))
+
+        # Backtracking on the continuation step: residual evaluations only, no Jacobian.
+        def search_cond(carry):
+            alpha, ok = carry
+            return ~ok & (alpha > _MIN_ALPHA)
+
+        def search_body(carry):
+            alpha, _ = carry
+            alpha = 0.5 * alpha
+            r, (merit, _) = fn(y + alpha * delta, args)
+            return alpha, acceptable(r, merit)
+
+        r_full, (m_full, _) = fn(y + delta, args)
+        ok_full = first | escape | acceptable(r_full, m_full)
+        alpha, ok = jax.lax.while_loop(search_cond, search_body, (jnp.asarray(1.0, dtype), ok_full))
+        # No acceptable step even at the smallest length: take the shortest flow step when dt
+        # is already tiny (it is a descent direction), else shrink dt and stay.
+        tiny_dt = state.dt <= _MIN_DT
+        accept = ok | tiny_dt
+        alpha = jnp.where(ok, alpha, _MIN_ALPHA)
+        y_new = y + alpha * delta
+
+        def with_aux(y_):
+            r, aux = fn(y_, args)
+            return r, (r, aux)
+
+        jac, (r_new, (m_new, weights)) = jax.jacfwd(with_aux, has_aux=True)(y_new)
+        finite = jnp.all(jnp.isfinite(r_new)) & jnp.isfinite(m_new) & jnp.all(jnp.isfinite(jac))
+        accept = first | (accept & finite)
+        ratio = max_abs(state.residual) / jnp.maximum(max_abs(r_new), jnp.finfo(dtype).tiny)
+        grown = jnp.minimum(state.dt * jnp.clip(ratio, 2.0, 10.0), self.max_dt)
+        dt = jnp.where(
+            escape | first,
+            self.initial_dt,
+            jnp.where(accept & (alpha == 1.0), grown, jnp.where(accept, state.dt, 0.1 * state.dt)),
+        ).astype(dtype)
+
+        def keep(a, b):
+            return jnp.where(accept, a, b)
+
+        jac = keep(jac, state.jacobian)
+        eig, escape_dy = lowest_mode(jac, weights, self.escape_size)
+        code = jnp.where(first & ~finite, NONFINITE, state.code)
+        stalled = ~accept & tiny_dt
+        code = jnp.where(stalled & (code == SUCCESS), STALLED, code)
+        new_state = PTCState(
+            residual=keep(r_new, state.residual),
+            merit=keep(m_new, state.merit),
+            jacobian=jac,
+            weights=weights,
+            dt=dt,
+            step=state.step + 1,
+            escapes=state.escapes + escape.astype(state.escapes.dtype),
+            eig=eig,
+            escape_dy=escape_dy,
+            code=code,
+        )
+        return keep(y_new, y), new_state, (keep(m_new, state.merit), weights)
+
+    def terminate(self, fn, y, args, options, state: PTCState, tags):
+        del fn, y, args, options, tags
+        done = self._converged(state.residual) & ~self._wants_escape(state)
+        failed = state.code != SUCCESS
+        result = optx.RESULTS.where(
+            failed, optx.RESULTS.nonlinear_divergence, optx.RESULTS.successful
+        )
+        return done | failed, result
+
+    def postprocess(self, fn, y, aux, args, options, state, tags, result):
+        del fn, args, options, state, tags, result
+        return y, aux, {}
+
+
+def final_code(state: PTCState, converged) -> Int[Array, ""]:
+    """The :mod:`pacjax._solution` result code after a run."""
+    return jnp.where(
+        converged,
+        SUCCESS,
+        jnp.where(state.code == SUCCESS, MAX_STEPS, state.code),
+    )
