@@ -18,12 +18,12 @@ from ._strain import StrainModel as StrainModel
 from ._tendons import Tendon as Tendon
 
 __version__ = "0.1.0"
-from ._equilibrium import SolverOptions as SolverOptions
-from ._equilibrium import solve_equilibrium as solve_equilibrium
-from ._solution import Equilibrium as Equilibrium
+from . import presets as presets
 from ._api import astype as astype
 from ._api import backbone as backbone
 from ._api import markers as markers
 from ._api import tendon_tensions as tendon_tensions
 from ._api import tip_pose as tip_pose
-from . import presets as presets
+from ._equilibrium import SolverOptions as SolverOptions
+from ._equilibrium import solve_equilibrium as solve_equilibrium
+from ._solution import Equilibrium as Equilibrium

@@ -1,7 +1,6 @@
 """Kinematic queries on a solved (or any) configuration: backbone, markers, tip pose."""
 
 import equinox as eqx
-
 import jax.numpy as jnp
 import jax.tree_util as jtu
 import numpy as np

@@ -91,7 +91,8 @@ class Scene(eqx.Module):
             raise TypeError(f"Scene.robot must be a Robot, got {type(self.robot).__name__}")
         if not isinstance(self.model, StrainModel):
             raise TypeError(
-                f"Scene.model must be a strain model (PCC, PAC, PolynomialCurvature), got {self.model!r}"
+                "Scene.model must be a strain model (PCC, PAC, PolynomialCurvature), "
+                f"got {self.model!r}"
             )
         n = self.robot.n_segments
         for i, t in enumerate(self.tendons):
