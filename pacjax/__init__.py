@@ -24,6 +24,8 @@ from ._api import backbone as backbone
 from ._api import markers as markers
 from ._api import tendon_tensions as tendon_tensions
 from ._api import tip_pose as tip_pose
+from ._batch import iter_batch as iter_batch
+from ._batch import solve_batch as solve_batch
 from ._equilibrium import SolverOptions as SolverOptions
 from ._equilibrium import solve_equilibrium as solve_equilibrium
 from ._solution import Equilibrium as Equilibrium

@@ -139,8 +139,8 @@ def _stability_tol(opts, dtype):
     )
 
 
-@eqx.filter_jit
-def _solve(scene: Scene, controls, q0, opts: SolverOptions) -> Equilibrium:
+def solve_core(scene: Scene, controls, q0, opts: SolverOptions) -> Equilibrium:
+    """One equilibrium (traceable; :func:`solve_equilibrium` and the batch solver wrap it)."""
     problem = _Scaled.build(scene, controls)
     frozen = jax.lax.stop_gradient(problem)
     y0 = jax.lax.stop_gradient(q0) / frozen.sigma
@@ -180,6 +180,9 @@ def _solve(scene: Scene, controls, q0, opts: SolverOptions) -> Equilibrium:
         result=final_code(state, converged),
         energy=energy,
     )
+
+
+_solve = eqx.filter_jit(solve_core)
 
 
 def check_controls(scene: Scene, controls, dtype) -> jax.Array:
