@@ -45,15 +45,18 @@ def max_abs(x):
     return jnp.max(jnp.abs(x))
 
 
-def lowest_mode(jac, weights, size):
-    """Smallest eigenvalue of ``diag(w) J diag(1/w)`` symmetrised, and a ``y`` step along it.
+def lowest_mode(jac, weights, size, tol):
+    """Smallest eigenvalue of ``diag(w) J diag(1/w)`` symmetrised, and an escape step.
 
     With ``w = sqrt(d) sigma`` this matrix is ``D^-1/2 (dF/dq) D^-1/2``: the stiffness relative
-    to the elastic stiffness, whose eigenvalue signs are those of the Hessian.
+    to the elastic stiffness, whose eigenvalue signs are those of the Hessian. The escape step
+    (in ``y``) follows every direction of negative curvature at once, so a saddle with several
+    unstable modes (one per segment of a robot) is left in one go.
     """
     k = (weights[:, None] * jac) / weights[None, :]
     eigvals, eigvecs = jnp.linalg.eigh(0.5 * (k + k.T))
-    dy = eigvecs[:, 0] / weights
+    unstable = (eigvals < -tol).at[0].set(True)
+    dy = (eigvecs @ jnp.where(unstable, 1.0, 0.0)) / weights
     dy = size * dy / jnp.maximum(max_abs(dy), jnp.finfo(dy.dtype).tiny)
     return eigvals[0], dy
 
@@ -104,7 +107,10 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
         eps = jnp.finfo(dtype).eps
         first = state.step == 0
         escape = self._wants_escape(state) & ~first
-        newton = jnp.linalg.solve(state.jacobian + eye / state.dt, -state.residual)
+        # Keep the step matrix positive definite where the stiffness is not (a saddle or a
+        # maximum nearby): the step is then a descent direction, never attracted to a saddle.
+        dt_safe = jnp.where(state.eig < 0, jnp.minimum(state.dt, 0.5 / -state.eig), state.dt)
+        newton = jnp.linalg.solve(state.jacobian + eye / dt_safe, -state.residual)
         delta = jnp.where(first, 0.0, jnp.where(escape, state.escape_dy, newton))
 
         def acceptable(r, merit):
@@ -152,7 +158,7 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
             return jnp.where(accept, a, b)
 
         jac = keep(jac, state.jacobian)
-        eig, escape_dy = lowest_mode(jac, weights, self.escape_size)
+        eig, escape_dy = lowest_mode(jac, weights, self.escape_size, self.stability_tol)
         code = jnp.where(first & ~finite, NONFINITE, state.code)
         stalled = ~accept & tiny_dt
         code = jnp.where(stalled & (code == SUCCESS), STALLED, code)

@@ -92,9 +92,9 @@ class _PlanarCurvature(StrainModel):
 
         With ``frame="paper"`` the frame is twisted by ``phi``: a real torsion, factor 1 (the
         paper's ``k_torsion``). With the torsion-free frame ``phi`` is only the direction of the
-        bending plane; its stiffness is a regulariser (default 1e-3) that keeps the Hessian
-        regular at zero curvature, where ``phi`` is undefined, while biasing the plane of a bent
-        segment by a relative amount of that order.
+        bending plane; its stiffness is a regulariser (default 1e-3, energy
+        ``k (1 - cos phi)``) that keeps the Hessian regular at zero curvature, where ``phi`` is
+        undefined, while biasing the plane of a bent segment by a relative amount of that order.
         """
         if self.phi_stiffness is not None:
             return self.phi_stiffness
@@ -119,9 +119,13 @@ class _PlanarCurvature(StrainModel):
         return None
 
     def coordinate_energy(self, q, torsion_stiffness):
-        # The paper's 1/2 k_phi phi^2 with k_phi = GJ / L (times phi_stiffness_factor). It also
-        # keeps the Hessian regular at zero curvature, where phi is undefined.
-        return 0.5 * self.phi_stiffness_factor() * torsion_stiffness * q[-2] ** 2
+        k_phi = self.phi_stiffness_factor() * torsion_stiffness
+        if self.frame == "paper":
+            # The paper's 1/2 k_phi phi^2, k_phi = GJ / L: phi is a twist of the frame.
+            return 0.5 * k_phi * q[-2] ** 2
+        # A regulariser on the bending-plane angle: same curvature at phi = 0 as 1/2 k phi^2,
+        # but periodic, so phi and phi + 2 pi stay the same configuration.
+        return k_phi * (1.0 - jnp.cos(q[-2]))
 
 
 class PCC(_PlanarCurvature):
