@@ -7,6 +7,7 @@ chunk is sharded along the batch axis with ``jax.sharding`` and XLA runs the sha
 in a multi-host run (``jax.distributed.initialize()``), each process solves the rows it owns.
 """
 
+import dataclasses
 from collections.abc import Callable, Iterator
 
 import equinox as eqx
@@ -16,7 +17,14 @@ import jax.tree_util as jtu
 import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
-from ._equilibrium import SolverOptions, check_controls, check_q, solve_core, solver_dtype
+from ._equilibrium import (
+    SolverOptions,
+    as_traced_leaves,
+    check_controls,
+    check_q,
+    solve_core,
+    solver_dtype,
+)
 from ._scene import Scene
 from ._solution import Equilibrium
 
@@ -67,6 +75,7 @@ def iter_batch(
     """
     opts = SolverOptions(**options)
     dtype = solver_dtype(scene)
+    scene = as_traced_leaves(scene, dtype)
     controls_batch = np.asarray(controls_batch, dtype=float)
     if controls_batch.ndim != 2:
         raise ValueError(
@@ -142,7 +151,7 @@ def _run_chunk(scene, u, q, p, update, opts, chunk, dtype, sharding):
 def _retry_failed(scene, u, q, p, update, opts, eq, dtype):
     """Re-solve the rows that failed with the diffrax flow, keeping whichever converged."""
     bad = np.flatnonzero(~np.asarray(eq.converged))
-    flow = eqx.tree_at(lambda o: o.method, opts, "flow")
+    flow = dataclasses.replace(opts, method="flow")
     pb = None if p is None else jtu.tree_map(lambda x: x[bad], p)
     retry = _run_chunk(scene, u[bad], q[bad], pb, update, flow, len(bad), dtype, None)
     better = np.asarray(retry.converged)

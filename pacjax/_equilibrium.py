@@ -19,6 +19,8 @@ undefined) is detected from the smallest eigenvalue of the scaled stiffness and,
 along its direction of negative curvature.
 """
 
+import dataclasses
+
 import diffrax
 import equinox as eqx
 import jax
@@ -155,6 +157,7 @@ def solve_core(scene: Scene, controls, q0, opts: SolverOptions) -> Equilibrium:
         escapes=opts.escapes,
         escape_size=opts.escape_size,
         stability_tol=_stability_tol(opts, q0.dtype),
+        symmetric=scene.is_conservative,
     )
     sol = optx.root_find(
         _Scaled.root_fn,
@@ -217,6 +220,20 @@ def check_q(scene: Scene, q, dtype) -> jax.Array:
     return jnp.asarray(q, dtype)
 
 
+def as_traced_leaves(scene: Scene, dtype) -> Scene:
+    """Python numbers put into a scene (e.g. by ``eqx.tree_at``) become arrays.
+
+    ``jit`` would treat them as compile-time constants and recompile for every new value.
+    """
+
+    def convert(x):
+        if isinstance(x, (float, int)) and not isinstance(x, bool):
+            return jnp.asarray(x, dtype)
+        return x
+
+    return jtu.tree_map(convert, scene)
+
+
 def solver_dtype(scene: Scene):
     """The floating dtype the scene's parameters are stored in."""
     leaves = [x for x in jtu.tree_leaves(scene) if eqx.is_inexact_array(x)]
@@ -245,12 +262,13 @@ def solve_equilibrium(
         raise TypeError(f"scene must be a pacjax.Scene, got {type(scene).__name__}")
     opts = SolverOptions(**options)
     dtype = solver_dtype(scene)
+    scene = as_traced_leaves(scene, dtype)
     controls = check_controls(scene, controls, dtype)
     q0 = check_q(scene, q0, dtype)
     eq = _solve(scene, controls, q0, opts)
     if fallback and opts.method == "ptc" and not _is_traced(eq.converged):
         if not bool(np.all(eq.converged)):
-            retry = _solve(scene, controls, q0, eqx.tree_at(lambda o: o.method, opts, "flow"))
+            retry = _solve(scene, controls, q0, dataclasses.replace(opts, method="flow"))
             better = np.asarray(retry.converged) & ~np.asarray(eq.converged)
             if np.any(better):
                 eq = jtu.tree_map(lambda a, b: jnp.where(_bcast(better, a), a, b), retry, eq)

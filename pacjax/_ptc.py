@@ -37,6 +37,8 @@ class PTCState(eqx.Module):
     step: Int[Array, ""]
     escapes: Int[Array, ""]
     eig: Float[Array, ""]
+    eigvals: Float[Array, " n"]
+    eigvecs: Float[Array, "n n"]
     escape_dy: Float[Array, " n"]
     code: Int[Array, ""]
 
@@ -45,20 +47,20 @@ def max_abs(x):
     return jnp.max(jnp.abs(x))
 
 
-def lowest_mode(jac, weights, size, tol):
-    """Smallest eigenvalue of ``diag(w) J diag(1/w)`` symmetrised, and an escape step.
+def stiffness_modes(jac, weights, size, tol):
+    """Eigen-decomposition of ``K = diag(w) J diag(1/w)`` symmetrised, and an escape step.
 
-    With ``w = sqrt(d) sigma`` this matrix is ``D^-1/2 (dF/dq) D^-1/2``: the stiffness relative
-    to the elastic stiffness, whose eigenvalue signs are those of the Hessian. The escape step
-    (in ``y``) follows every direction of negative curvature at once, so a saddle with several
-    unstable modes (one per segment of a robot) is left in one go.
+    With ``w = sqrt(d) sigma`` the matrix ``K`` is ``D^-1/2 (dF/dq) D^-1/2``: the stiffness
+    relative to the elastic stiffness, whose eigenvalue signs are those of the Hessian. The
+    escape step (in ``y``) follows every direction of negative curvature at once, so a saddle
+    with several unstable modes (one per segment of a robot) is left in one go.
     """
     k = (weights[:, None] * jac) / weights[None, :]
     eigvals, eigvecs = jnp.linalg.eigh(0.5 * (k + k.T))
     unstable = (eigvals < -tol).at[0].set(True)
     dy = (eigvecs @ jnp.where(unstable, 1.0, 0.0)) / weights
     dy = size * dy / jnp.maximum(max_abs(dy), jnp.finfo(dy.dtype).tiny)
-    return eigvals[0], dy
+    return eigvals, eigvecs, dy
 
 
 class PseudoTransientContinuation(optx.AbstractRootFinder):
@@ -72,6 +74,7 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
     escapes: int = 2
     escape_size: float = 0.05
     stability_tol: float = 1e-12
+    symmetric: bool = True
 
     def init(self, fn, y, args, options, f_struct, aux_struct, tags):
         del fn, args, options, aux_struct, tags
@@ -86,6 +89,8 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
             step=jnp.asarray(0),
             escapes=jnp.asarray(0),
             eig=jnp.asarray(0.0, dtype),
+            eigvals=jnp.ones(n, dtype),
+            eigvecs=jnp.eye(n, dtype=dtype),
             escape_dy=jnp.zeros(n, dtype),
             code=jnp.asarray(SUCCESS),
         )
@@ -107,10 +112,20 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
         eps = jnp.finfo(dtype).eps
         first = state.step == 0
         escape = self._wants_escape(state) & ~first
-        # Keep the step matrix positive definite where the stiffness is not (a saddle or a
-        # maximum nearby): the step is then a descent direction, never attracted to a saddle.
-        dt_safe = jnp.where(state.eig < 0, jnp.minimum(state.dt, 0.5 / -state.eig), state.dt)
-        newton = jnp.linalg.solve(state.jacobian + eye / dt_safe, -state.residual)
+        # Where the stiffness is indefinite (a saddle or a maximum nearby) the step must still
+        # go downhill and must not be drawn to the saddle.
+        if self.symmetric:
+            # Conservative scene: K is the scaled Hessian. Continuation step with |lambda|
+            # ("saddle-free" Newton): full Newton along stable modes, descent along the others.
+            w = state.weights
+            rz = state.eigvecs.T @ (w * state.residual)
+            gain = 1.0 / (jnp.abs(state.eigvals) + 1.0 / state.dt)
+            newton = -(state.eigvecs @ (gain * rz)) / w
+        else:
+            # Follower loads: J is not symmetric; shift it by enough to dominate the negative
+            # curvature of its symmetric part.
+            dt_safe = jnp.where(state.eig < 0, jnp.minimum(state.dt, 0.5 / -state.eig), state.dt)
+            newton = jnp.linalg.solve(state.jacobian + eye / dt_safe, -state.residual)
         delta = jnp.where(first, 0.0, jnp.where(escape, state.escape_dy, newton))
 
         def acceptable(r, merit):
@@ -158,7 +173,10 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
             return jnp.where(accept, a, b)
 
         jac = keep(jac, state.jacobian)
-        eig, escape_dy = lowest_mode(jac, weights, self.escape_size, self.stability_tol)
+        eigvals, eigvecs, escape_dy = stiffness_modes(
+            jac, weights, self.escape_size, self.stability_tol
+        )
+        eig = eigvals[0]
         code = jnp.where(first & ~finite, NONFINITE, state.code)
         stalled = ~accept & tiny_dt
         code = jnp.where(stalled & (code == SUCCESS), STALLED, code)
@@ -171,6 +189,8 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
             step=state.step + 1,
             escapes=state.escapes + escape.astype(state.escapes.dtype),
             eig=eig,
+            eigvals=eigvals,
+            eigvecs=eigvecs,
             escape_dy=escape_dy,
             code=code,
         )

@@ -49,7 +49,7 @@ def _frames(scene: Scene, q, segment, s):
 class _Drawn:
     """Everything of one configuration that a figure shows, in mm (computed once)."""
 
-    def __init__(self, scene: Scene, q, n_rings_per_segment: int = 12):
+    def __init__(self, scene: Scene, q, n_rings_per_segment: int = 8):
         q = np.asarray(q, float)
         if q.shape != (scene.n_dofs,):
             raise ValueError(
@@ -127,6 +127,15 @@ class _Drawn:
         return np.concatenate(pts)
 
 
+def _case_color(i: int) -> str:
+    return CASE_COLORS[i % len(CASE_COLORS)]
+
+
+def _case_style(i: int):
+    """The first case solid, the others dashed on top of it, so that overlaps stay visible."""
+    return "-" if i == 0 else (0, (3.5, 1.8))
+
+
 def _as_cases(scene: Scene, equilibria) -> dict[str, tuple[Scene, np.ndarray]]:
     """Normalise ``{label: q | Equilibrium | (scene, q)}`` or a list of them."""
     if not isinstance(equilibria, Mapping):
@@ -161,9 +170,11 @@ def draw_backbone(
     view: str = "3d",
     color: str = CASE_COLORS[0],
     label: str | None = None,
+    linestyle="-",
     markers: bool = True,
     rings: bool = True,
     loads: bool = True,
+    load_labels: bool = True,
     arrow_mm: float | None = None,
 ):
     """Draw one configuration on ``ax`` (positions in mm).
@@ -173,9 +184,10 @@ def draw_backbone(
             ``"yz"`` or ``"xy"``).
         scene: the :class:`Scene` (or an already evaluated drawing, internal).
         q: configuration of ``scene``.
-        color: the case's colour; ``label``: its legend label.
+        color, label, linestyle: the case's colour, legend label and backbone line style.
         markers: draw the scene's marker sites; ``rings``: draw cross-section rings at the
-            body's radius (tube look); ``loads``: draw payload, force and moment arrows.
+            body's radius (tube look); ``loads``: draw payload, force and moment arrows;
+            ``load_labels``: write their magnitudes (once per panel is enough).
         arrow_mm: arrow length (mm) for loads (default: a fifth of the robot).
     """
     d = scene if isinstance(scene, _Drawn) else _Drawn(scene, q)
@@ -193,13 +205,22 @@ def draw_backbone(
             boundary = i in d.boundary_index
             ax.plot(
                 *xy(d.ring(i)),
-                color="0.25" if boundary and i == 0 else color,
-                lw=2.0 if i == 0 else (1.1 if boundary else 0.6),
-                alpha=0.9 if boundary else 0.35,
+                color="0.25" if i == 0 else (color if boundary else "0.55"),
+                lw=2.2 if i == 0 else (1.0 if boundary else 0.5),
+                alpha=0.9 if i == 0 else (0.7 if boundary else 0.3),
                 zorder=1,
             )
-    ax.plot(*xy(d.points), color=color, lw=7, alpha=0.18, solid_capstyle="round", zorder=2)
-    ax.plot(*xy(d.points), color=color, lw=2.4, label=label, solid_capstyle="round", zorder=3)
+    solid = linestyle in ("-", "solid")
+    ax.plot(*xy(d.points), color=color, lw=8, alpha=0.15, solid_capstyle="round", zorder=2)
+    ax.plot(
+        *xy(d.points),
+        color=color,
+        lw=3.0 if solid else 2.2,
+        ls=linestyle,
+        label=label,
+        solid_capstyle="round",
+        zorder=3,
+    )
     ax.plot(
         *xy(d.points[d.boundary_index[1:]]),
         ls="none",
@@ -221,10 +242,12 @@ def draw_backbone(
                 ax.plot(*xy(p), ls="none", marker="s", ms=4, color="0.35", zorder=5)
             elif kind == "moment":
                 ax.plot(*xy(p), ls="none", marker="$\\circlearrowleft$", ms=14, color=color)
-                _label(ax, xy(p), text, color, view)
+                if load_labels:
+                    _label(ax, xy(p), text)
             else:
                 _arrow(ax, p, p + arrow_mm * direction, idx, color if kind == "force" else "0.2")
-                _label(ax, xy(p + arrow_mm * direction), text, color, view)
+                if load_labels:
+                    _label(ax, xy(p + arrow_mm * direction), text)
     return d
 
 
@@ -242,7 +265,7 @@ def _arrow(ax, start, end, idx, color):
         )
 
 
-def _label(ax, coords, text, color, view):
+def _label(ax, coords, text):
     if not text:
         return
     coords = [float(c[0]) for c in coords]
@@ -273,7 +296,7 @@ def _set_limits(ax, view: str, lo: np.ndarray, hi: np.ndarray):
         ax.set_xlim(center[0] - half, center[0] + half)
         ax.set_ylim(center[1] - half, center[1] + half)
         ax.set_zlim(center[2] - half, center[2] + half)
-        ax.set_box_aspect((1, 1, 1))
+        ax.set_box_aspect((1, 1, 1), zoom=0.9)
         ax.set_xlabel("x (mm)", labelpad=-2)
         ax.set_ylabel("y (mm)", labelpad=-2)
         ax.set_zlabel("z (mm)", labelpad=-2)
@@ -301,7 +324,7 @@ def _normalise_targets(targets):
 
 def _legend(fig, cases: Sequence[str], show_markers: bool, targets: Mapping, has_loads: bool):
     handles = [
-        Line2D([], [], color=CASE_COLORS[i % len(CASE_COLORS)], lw=3, label=label)
+        Line2D([], [], color=_case_color(i), ls=_case_style(i), lw=3, label=label)
         for i, label in enumerate(cases)
     ]
     handles.append(
@@ -363,7 +386,7 @@ def plot_equilibrium_grid(
     labels: list[str] = []
     for cases in drawn.values():
         labels += [k for k in cases if k not in labels]
-    color = {k: CASE_COLORS[i % len(CASE_COLORS)] for i, k in enumerate(labels)}
+    order = {k: i for i, k in enumerate(labels)}
     everything = [d for cases in drawn.values() for d in cases.values()]
     targets = _normalise_targets(targets)
     arrow_mm = _arrow_length(everything)
@@ -381,9 +404,16 @@ def plot_equilibrium_grid(
             index = row + 1 if single else row * n_cols + col + 1
             kw = {"projection": "3d"} if view == "3d" else {}
             ax = fig.add_subplot(n_rows, n_cols, index, **kw)
-            for label, d in cases.items():
+            for j, (label, d) in enumerate(cases.items()):
                 draw_backbone(
-                    ax, d, view=view, color=color[label], markers=markers, arrow_mm=arrow_mm
+                    ax,
+                    d,
+                    view=view,
+                    color=_case_color(order[label]),
+                    linestyle=_case_style(order[label]),
+                    markers=markers,
+                    load_labels=j == 0,
+                    arrow_mm=arrow_mm,
                 )
             _draw_targets(ax, targets, view)
             _set_limits(ax, view, lo, hi)

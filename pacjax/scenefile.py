@@ -150,6 +150,8 @@ class _Table:
         raise ValueError(f"{self.source}: {field or 'top level'}: {message}")
 
     def has(self, key: str) -> bool:
+        """Whether ``key`` is present (it is then an allowed key of this table)."""
+        self.used.add(key)
         return key in self.data
 
     def raw(self, key, required=False):
@@ -230,7 +232,15 @@ class _Table:
         unknown = sorted(set(self.data) - self.used)
         if unknown:
             allowed = ", ".join(sorted(self.used))
-            self.fail(f"unknown key(s) {', '.join(map(repr, unknown))} (allowed here: {allowed})")
+            hint = ""
+            if self.where and set(unknown) & set(_TOP_LEVEL):
+                hint = (
+                    "; top-level keys such as controls or markers must come before the first "
+                    "[table] of the file"
+                )
+            self.fail(
+                f"unknown key(s) {', '.join(map(repr, unknown))} (allowed here: {allowed}){hint}"
+            )
 
     def build(self, constructor, *args, **kwargs):
         """Call a pacjax constructor, re-raising its own checks with the file and table."""
@@ -395,7 +405,7 @@ def _read_preset(top: _Table):
         else:
             args[key] = t.raw(key)
     for key in ("model", "loads"):
-        if t.has(key):
+        if key in t.data:
             t.fail(f"set the preset's {key} with [{key}] / [[{key}]], not in [preset]", key)
     t.finish()
     return name, args
