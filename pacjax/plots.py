@@ -296,7 +296,7 @@ def _set_limits(ax, view: str, lo: np.ndarray, hi: np.ndarray):
         ax.set_xlim(center[0] - half, center[0] + half)
         ax.set_ylim(center[1] - half, center[1] + half)
         ax.set_zlim(center[2] - half, center[2] + half)
-        ax.set_box_aspect((1, 1, 1), zoom=0.9)
+        ax.set_box_aspect((1, 1, 1), zoom=1.1)
         ax.set_xlabel("x (mm)", labelpad=-2)
         ax.set_ylabel("y (mm)", labelpad=-2)
         ax.set_zlabel("z (mm)", labelpad=-2)
@@ -428,7 +428,10 @@ def plot_equilibrium_grid(
     show_markers = markers and any(d.markers is not None for d in everything)
     has_loads = any(kind in ("weight", "force") for d in everything for kind, *_ in d.loads)
     _legend(fig, labels, show_markers, targets, has_loads)
-    fig.get_layout_engine().set(rect=(0, 0.06 if single else 0.035, 1, 0.96))
+    # Constrained layout does not see a 3D axes' z label: leave room for it explicitly.
+    fig.get_layout_engine().set(
+        rect=(0, 0.06 if single else 0.035, 1, 0.96), wspace=0.08 if "3d" in views else 0.02
+    )
     if path is not None:
         fig.savefig(os.fspath(path), dpi=110)
     return fig
