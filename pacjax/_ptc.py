@@ -133,7 +133,8 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
             slack = 64 * eps * (jnp.abs(state.merit) + jnp.abs(merit))
             return finite & ((merit <= state.merit + slack) | self._converged(r))
 
-        # Backtracking on the continuation step: residual evaluations only, no Jacobian.
+        # Backtracking on the continuation step: residual evaluations only, no Jacobian. The
+        # loop starts at the full step (alpha = 1), so the residual graph is traced once.
         def search_cond(carry):
             alpha, ok = carry
             return ~ok & (alpha > _MIN_ALPHA)
@@ -142,11 +143,11 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
             alpha, _ = carry
             alpha = 0.5 * alpha
             r, (merit, _) = fn(y + alpha * delta, args)
-            return alpha, acceptable(r, merit)
+            return alpha, acceptable(r, merit) | first | escape
 
-        r_full, (m_full, _) = fn(y + delta, args)
-        ok_full = first | escape | acceptable(r_full, m_full)
-        alpha, ok = jax.lax.while_loop(search_cond, search_body, (jnp.asarray(1.0, dtype), ok_full))
+        alpha, ok = jax.lax.while_loop(
+            search_cond, search_body, (jnp.asarray(2.0, dtype), jnp.asarray(False))
+        )
         # No acceptable step even at the smallest length: take the shortest flow step when dt
         # is already tiny (it is a descent direction), else shrink dt and stay.
         tiny_dt = state.dt <= _MIN_DT

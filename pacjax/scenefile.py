@@ -6,11 +6,13 @@ a tendon on a segment that does not exist, ...) raises a :class:`ValueError` tha
 file, the table and the field, before anything is compiled or solved. SI units throughout,
 except the documented ``*_deg`` angle fields.
 
-A full example (every table is optional except ``[[segments]]``, or ``[preset]`` instead)::
+A full example (every table is optional except ``[[segments]]``, or ``[preset]`` instead;
+without ``[model]`` the model is PAC). Top-level keys (``controls``, ``markers``, ...) must come
+before the first table, as TOML puts every later key into the table above it::
 
     name = "two-section arm"              # optional; default: the file's stem
     description = "anything"              # optional
-    controls = [0.01, 0.0, 0.0, 0.0]      # optional: one per tendon (m pull-in, or N tension)
+    controls = [0.01]                     # optional: one per tendon (m pull-in, or N tension)
     markers = [[0, 0.5], [1, 1.0], [1, 1.0, [0.0, 0.02, 0.0]]]  # (segment, s[, local offset])
 
     [model]

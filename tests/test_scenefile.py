@@ -2,6 +2,8 @@
 
 import math
 import pathlib
+import re
+import textwrap
 
 import equinox as eqx
 import jax
@@ -10,6 +12,7 @@ import numpy as np
 import pytest
 
 import pacjax as pj
+from pacjax import scenefile
 from pacjax.scenefile import load_scene, save_scene, scene_from_toml, scene_to_toml
 
 SCENES = pathlib.Path(__file__).resolve().parent.parent / "experiments" / "scenes"
@@ -136,6 +139,16 @@ def test_preset_string_form_and_extra_loads():
     expected = pj.presets.stella2023(loads=(pj.PointForce((0.5, 0.0, 0.0), 2, 1.0),))
     assert_same_scene(scene, expected)
     assert extra["name"] == "scene"
+
+
+def test_documented_examples_parse():
+    blocks = re.findall(r"::\n\n((?:    .*\n|\n)+)", scenefile.__doc__)
+    assert len(blocks) == 2
+    full, preset = (scene_from_toml(textwrap.dedent(b), source="docstring") for b in blocks)
+    scene, controls, extra = full
+    assert (scene.n_segments, scene.n_tendons, len(scene.loads)) == (2, 1, 4)
+    assert controls.shape == (1,) and extra["solver"] == {"tol": 1e-10, "max_steps": 100}
+    assert preset[0].n_tendons == 9 and preset[2]["preset"] == "stella2023"
 
 
 # ------------------------------------------------------------------------------ examples
