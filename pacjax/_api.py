@@ -6,7 +6,24 @@ import jax.tree_util as jtu
 import numpy as np
 from jaxtyping import Array, Float
 
+from ._rotation import matvec3
 from ._scene import Scene, normalise_sites
+
+
+@eqx.filter_jit
+def _frames(scene: Scene, q, segments: tuple[int, ...], s, offsets):
+    rot, pos = scene.frames(q, np.asarray(segments, np.int64), s)
+    return pos + matvec3(rot, offsets.astype(q.dtype)), rot
+
+
+def _query(scene: Scene, q, segments, s, offsets=None):
+    """Compiled frame query (segments static, everything else traced)."""
+    q = jnp.asarray(q)
+    if q.shape[-1:] != (scene.n_dofs,):
+        raise ValueError(f"q must have shape ({scene.n_dofs},), got {q.shape}")
+    s = jnp.asarray(s, q.dtype)
+    offsets = jnp.zeros((len(segments), 3), q.dtype) if offsets is None else offsets
+    return _frames(scene, q, tuple(int(k) for k in segments), s, jnp.asarray(offsets, q.dtype))
 
 
 def backbone(
@@ -22,8 +39,7 @@ def backbone(
     n = scene.n_segments
     coord = np.linspace(0.0, n, n_points)
     seg = np.minimum(np.floor(coord).astype(np.int32), n - 1)
-    rot, pos = scene.frames(jnp.asarray(q), seg, coord - seg)
-    return pos, rot
+    return _query(scene, q, seg, coord - seg)
 
 
 def markers(scene: Scene, q: Float[Array, " n_dofs"], sites=None) -> Float[Array, "m 3"]:
@@ -38,16 +54,14 @@ def markers(scene: Scene, q: Float[Array, " n_dofs"], sites=None) -> Float[Array
     seg = np.asarray([x[0] for x in sites], np.int32)
     s = np.asarray([x[1] for x in sites])
     offsets = np.asarray([x[2] for x in sites])
-    q = jnp.asarray(q)
-    rot, pos = scene.frames(q, seg, s)
-    return pos + jnp.einsum("pij,pj->pi", rot, jnp.asarray(offsets, q.dtype))
+    return _query(scene, q, seg, s, offsets)[0]
 
 
 def tip_pose(
     scene: Scene, q: Float[Array, " n_dofs"]
 ) -> tuple[Float[Array, "3"], Float[Array, "3 3"]]:
     """Position (m) and rotation of the tip frame (end of the last segment)."""
-    rot, pos = scene.frames(jnp.asarray(q), np.asarray([scene.n_segments - 1]), np.ones(1))
+    pos, rot = _query(scene, q, [scene.n_segments - 1], np.ones(1))
     return pos[0], rot[0]
 
 
@@ -59,4 +73,9 @@ def astype(tree, dtype):
 def tendon_tensions(scene: Scene, q, controls) -> Float[Array, " m"]:
     """Tension (N) in every tendon at ``q`` under ``controls``."""
     q = jnp.asarray(q)
-    return scene.tendon_tensions(q, jnp.asarray(controls, q.dtype))
+    return _tensions(scene, q, jnp.asarray(controls, q.dtype))
+
+
+@eqx.filter_jit
+def _tensions(scene, q, controls):
+    return scene.tendon_tensions(q, controls)

@@ -79,3 +79,17 @@ def rotate(omega: Float[Array, "3"], v: Float[Array, "3"]) -> Float[Array, "3"]:
     w = _cross(omega, v)
     ww = _cross(omega, w)
     return jnp.stack([v[k] + a * w[k] + b * ww[k] for k in range(3)])
+
+
+def matmul3(a: Float[Array, "*b 3 3"], b: Float[Array, "*b 3 3"]) -> Float[Array, "*b 3 3"]:
+    """``a @ b`` for stacks of 3x3 matrices as multiply-and-sum.
+
+    XLA:CPU runs batched tiny ``dot_general`` s as one small GEMM per matrix, which neither
+    fuses nor vectorises over the batch; elementwise products do both.
+    """
+    return jnp.sum(a[..., :, :, None] * b[..., None, :, :], axis=-2)
+
+
+def matvec3(a: Float[Array, "*b 3 3"], v: Float[Array, "*b 3"]) -> Float[Array, "*b 3"]:
+    """``a @ v`` for stacks of 3x3 matrices and vectors (multiply-and-sum, see matmul3)."""
+    return jnp.sum(a * v[..., None, :], axis=-1)

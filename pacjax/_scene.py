@@ -13,9 +13,10 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from ._energy import elastic_energy, gravity_masses, moment_cotangent
-from ._kinematics import KinematicsConfig, frames_at
+from ._kinematics import KinematicsConfig, PointLayout, grid_frames
 from ._loads import Gravity, PointForce, PointMass, PointMoment
 from ._robot import Robot
+from ._rotation import matvec3
 from ._strain import StrainModel
 from ._tendons import Tendon, TendonRouting, tendon_energy, tendon_tensions
 
@@ -183,24 +184,29 @@ class Scene(eqx.Module):
 
     # ----------------------------------------------------------------------------- kinematics
     def frames(self, q, segment, s):
-        """World rotations (p, 3, 3) and positions (p, 3) at points ``(segment[k], s[k])``."""
-        return frames_at(
+        """World rotations (p, 3, 3) and positions (p, 3) at points ``(segment[k], s[k])``.
+
+        ``segment`` must be concrete (Python ints or a numpy array); ``s`` may be traced.
+        """
+        q = jnp.asarray(q)
+        layout = PointLayout(self.n_segments, np.asarray(segment).reshape(-1))
+        rot, pos = grid_frames(
             self.model,
             self.coordinates(q),
             self.robot.stacked("length").astype(q.dtype),
             self.robot.base_rotation,
             self.robot.base_position,
-            jnp.asarray(segment, jnp.int32),
-            jnp.asarray(s, q.dtype),
+            layout.grid(jnp.asarray(s, q.dtype).reshape(-1), q.dtype),
             self.kinematics,
         )
+        return layout.select(rot), layout.select(pos)
 
     def tendon_lengths(self, q: Float[Array, " n_dofs"]) -> Float[Array, " m"]:
         """Length (m) of every tendon at configuration ``q``."""
         routing = TendonRouting(self.tendons)
         rot, pos = self.frames(q, routing.point_segment, routing.point_s)
         offsets = routing.local_offsets(self.tendons, q.dtype)
-        return routing.lengths(pos + jnp.einsum("pij,pj->pi", rot, offsets))
+        return routing.lengths(pos + matvec3(rot, offsets))
 
     def rest_tendon_lengths(self, dtype=float) -> Float[Array, " m"]:
         """Length (m) of every tendon on the straight robot at rest."""
@@ -257,7 +263,7 @@ class Scene(eqx.Module):
         if routing is not None:
             sl = slice(tendon_start, tendon_start + len(routing.point_s))
             offsets = routing.local_offsets(self.tendons, dtype)
-            points = pos[sl] + jnp.einsum("pij,pj->pi", rot[sl], offsets)
+            points = pos[sl] + matvec3(rot[sl], offsets)
             lengths = routing.lengths(points)
             rest = routing.rest_lengths(self.tendons, self.robot.stacked("length").astype(dtype))
             energy = energy + tendon_energy(self.tendons, lengths, rest, controls)
@@ -281,7 +287,7 @@ class Scene(eqx.Module):
         cot_rot = jnp.zeros_like(rot)
         if followers:
             local = jnp.stack([f.force for f in followers]).astype(dtype)
-            world = jnp.einsum("pij,pj->pi", jax.lax.stop_gradient(rot[: len(followers)]), local)
+            world = matvec3(jax.lax.stop_gradient(rot[: len(followers)]), local)
             cot_pos = cot_pos.at[: len(followers)].set(world)
         for k, m in enumerate(moments, start=len(followers)):
             moment = m.moment.astype(dtype)

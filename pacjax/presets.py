@@ -47,7 +47,8 @@ TENDON_ANGLES = (math.pi / 2, math.pi / 2 + 2 * math.pi / 3, math.pi / 2 + 4 * m
 #: Guide rings per segment (the tendon passes through each; frictionless pulleys).
 GUIDES = tuple(np.linspace(0.0, 1.0, 10).tolist())
 
-_MOUNTS = {
+#: Base rotations (base frame -> world) of the supported mounts.
+MOUNTS = {
     # base rotation taking the robot's rest axis (+z of the base frame) to the world
     "hanging": np.diag([1.0, -1.0, -1.0]),  # axis along -z (world), the paper's set-up
     "upright": np.eye(3),
@@ -82,8 +83,8 @@ def stella2023(
         loads: extra loads (e.g. a :class:`PointForce` for the human-interaction experiment).
         quadrature_points: Gauss-Legendre points per segment.
     """
-    if mount not in _MOUNTS:
-        raise ValueError(f"mount must be one of {tuple(_MOUNTS)}, got {mount!r}")
+    if mount not in MOUNTS:
+        raise ValueError(f"mount must be one of {tuple(MOUNTS)}, got {mount!r}")
     if n_sections < 1:
         raise ValueError(f"n_sections must be >= 1, got {n_sections}")
     law = ExponentialStiffening(STIFFENING_RATE) if stiffening else None
@@ -95,7 +96,7 @@ def stella2023(
         radius=RADIUS,
         stiffening=law,
     )
-    robot = Robot([segment] * n_sections, base_rotation=_MOUNTS[mount])
+    robot = Robot([segment] * n_sections, base_rotation=MOUNTS[mount])
     tendons = [
         Tendon(
             segment=k,

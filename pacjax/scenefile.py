@@ -109,7 +109,7 @@ __all__ = ["load_scene", "scene_from_toml", "scene_to_toml", "save_scene", "PRES
 #: Presets a scene file may name, by name.
 PRESETS = {"stella2023": presets.stella2023}
 #: Base rotations (base frame -> world) of the named mounts; the robot's rest axis is the base +z.
-MOUNTS = {name: np.asarray(r, float) for name, r in presets._MOUNTS.items()}
+MOUNTS = {name: np.asarray(r, float) for name, r in presets.MOUNTS.items()}
 
 _MODELS = ("PAC", "PCC", "PolynomialCurvature")
 _TOP_LEVEL = (
