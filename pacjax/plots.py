@@ -17,13 +17,13 @@ from __future__ import annotations
 import os
 from collections.abc import Mapping, Sequence
 
-import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 
+from ._api import _query
 from ._loads import PointForce, PointMass, PointMoment
 from ._scene import Scene
 
@@ -39,11 +39,11 @@ _PAYLOAD_MIN_MASS = 0.05  # kg: point masses at least this heavy get a labelled 
 
 
 # ------------------------------------------------------------------------------ geometry
-@eqx.filter_jit
 def _frames(scene: Scene, q, segment, s):
     """Rotations and positions at ``(segment[k], s[k])``, compiled once per scene structure
     (the plots evaluate a few hundred frames per configuration; op-by-op that takes seconds)."""
-    return scene.frames(q, segment, s)
+    pos, rot = _query(scene, q, np.asarray(segment), s)
+    return rot, pos
 
 
 class _Drawn:
