@@ -21,7 +21,6 @@ from ._equilibrium import (
     SolverOptions,
     as_traced_leaves,
     check_controls,
-    check_q,
     solve_core,
     solver_dtype,
 )
@@ -81,12 +80,19 @@ def iter_batch(
         raise ValueError(
             f"controls_batch must have shape (batch, {scene.n_tendons}), got {controls_batch.shape}"
         )
-    check_controls(scene, controls_batch, dtype)
+    check_controls(scene, controls_batch, dtype, batched=True)
     n = controls_batch.shape[0]
     if n == 0:
         raise ValueError("controls_batch is empty")
     if q0 is not None:
-        q0 = np.broadcast_to(np.asarray(check_q(scene, q0, dtype)), (n, scene.n_dofs))
+        q0 = np.asarray(q0, dtype=float)
+        if q0.shape not in ((scene.n_dofs,), (n, scene.n_dofs)):
+            raise ValueError(
+                f"q0 must have shape ({scene.n_dofs},) or ({n}, {scene.n_dofs}), got {q0.shape}"
+            )
+        if not np.all(np.isfinite(q0)):
+            raise ValueError("q0 contains NaN or infinite values")
+        q0 = np.broadcast_to(q0, (n, scene.n_dofs))
     if params is not None:
         if update is None:
             raise ValueError("params= needs update=(scene, row_of_params) -> scene")

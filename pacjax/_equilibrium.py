@@ -188,15 +188,22 @@ def solve_core(scene: Scene, controls, q0, opts: SolverOptions) -> Equilibrium:
 _solve = eqx.filter_jit(solve_core)
 
 
-def check_controls(scene: Scene, controls, dtype) -> jax.Array:
-    """Validate controls against the scene (before any compilation)."""
+def check_controls(scene: Scene, controls, dtype, batched: bool = False) -> jax.Array:
+    """Validate controls against the scene (before any compilation).
+
+    A single solve takes exactly ``(n_tendons,)``; a batch ``(batch, n_tendons)``.
+    """
     if controls is None:
         return scene.default_controls(dtype)
     arr = np.asarray(controls, dtype=float) if not isinstance(controls, jax.core.Tracer) else None
     shape = jnp.shape(controls)
-    if shape[-1:] != (scene.n_tendons,) and not (scene.n_tendons == 0 and shape[-1:] == (0,)):
+    want = ("batch", scene.n_tendons) if batched else (scene.n_tendons,)
+    if len(shape) != len(want) or shape[-1] != scene.n_tendons:
+        hint = " (use pacjax.solve_batch for many commands)" if len(shape) > len(want) else ""
         raise ValueError(
-            f"controls must have shape (..., {scene.n_tendons}) (one per tendon), got {shape}"
+            f"controls must have shape {want} (one per tendon), got {shape}{hint}".replace(
+                "'batch'", "batch"
+            )
         )
     if arr is not None:
         if not np.all(np.isfinite(arr)):
@@ -213,8 +220,8 @@ def check_q(scene: Scene, q, dtype) -> jax.Array:
     if q is None:
         return scene.zeros(dtype)
     shape = jnp.shape(q)
-    if shape[-1:] != (scene.n_dofs,):
-        raise ValueError(f"q0 must have shape (..., {scene.n_dofs}), got {shape}")
+    if shape != (scene.n_dofs,):
+        raise ValueError(f"q0 must have shape ({scene.n_dofs},), got {shape}")
     if not isinstance(q, jax.core.Tracer) and not np.all(np.isfinite(np.asarray(q, float))):
         raise ValueError("q0 contains NaN or infinite values")
     return jnp.asarray(q, dtype)

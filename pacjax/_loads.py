@@ -10,13 +10,14 @@ import equinox as eqx
 import numpy as np
 from jaxtyping import Array, Float
 
-from ._robot import as_float, check_finite, check_positive
+from ._robot import as_float, check_finite, check_positive, check_scalar, concrete
 
 
 def _check_site(owner: str, segment, s) -> None:
     if not isinstance(segment, (int, np.integer)) or isinstance(segment, bool) or segment < 0:
         raise ValueError(f"{owner}.segment must be an integer index >= 0, got {segment!r}")
-    v = np.asarray(s, dtype=float) if not hasattr(s, "aval") else None
+    check_scalar(f"{owner}.s", s)
+    v = concrete(s)
     if v is not None and not (np.isfinite(v) and 0.0 <= v <= 1.0):
         raise ValueError(f"{owner}.s must lie in [0, 1], got {s}")
 
@@ -34,9 +35,10 @@ class Gravity(eqx.Module):
     direction: Float[Array, "3"] = eqx.field(converter=as_float, default=(0.0, 0.0, -1.0))
 
     def __check_init__(self):
+        check_scalar("Gravity.g", self.g)
         check_positive("Gravity.g", self.g, allow_zero=True)
         _check_vector("Gravity.direction", self.direction)
-        d = np.asarray(self.direction) if not hasattr(self.direction, "aval") else None
+        d = concrete(self.direction)
         if d is not None and not np.isclose(np.linalg.norm(d), 1.0, atol=1e-6):
             raise ValueError(f"Gravity.direction must be a unit vector, got {d}")
 
@@ -53,6 +55,7 @@ class PointMass(eqx.Module):
     s: Float[Array, ""] = eqx.field(converter=as_float, default=1.0)
 
     def __check_init__(self):
+        check_scalar("PointMass.mass", self.mass)
         check_positive("PointMass.mass", self.mass, allow_zero=True)
         _check_site("PointMass", self.segment, self.s)
 

@@ -26,6 +26,12 @@ def concrete(x) -> np.ndarray | None:
         return None
 
 
+def check_scalar(name: str, value) -> None:
+    """Raise a ValueError naming ``name`` unless ``value`` is a single number."""
+    if jnp.shape(value) != ():
+        raise ValueError(f"{name} must be a single number, got shape {jnp.shape(value)}")
+
+
 def check_positive(name: str, value, allow_zero: bool = False) -> None:
     """Raise a ValueError naming ``name`` unless every entry of ``value`` is finite and > 0."""
     v = concrete(value)
@@ -118,6 +124,17 @@ class Segment(eqx.Module):
         self.stiffening = stiffening
 
     def __check_init__(self):
+        for field in (
+            "length",
+            "bending_stiffness",
+            "axial_stiffness",
+            "torsion_stiffness",
+            "linear_density",
+            "radius",
+        ):
+            check_scalar(f"Segment.{field}", getattr(self, field))
+        if self.radius_tip is not None:
+            check_scalar("Segment.radius_tip", self.radius_tip)
         check_positive("Segment.length", self.length)
         check_positive("Segment.bending_stiffness", self.bending_stiffness)
         check_positive("Segment.axial_stiffness", self.axial_stiffness)

@@ -79,6 +79,8 @@ class Scene(eqx.Module):
         quadrature_points=8,
         rotation_substeps=None,
     ):
+        if not isinstance(robot, Robot):
+            raise TypeError(f"Scene.robot must be a Robot, got {type(robot).__name__}")
         self.robot = robot
         self.model = model
         self.tendons = tuple(tendons)

@@ -17,7 +17,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from ._robot import as_float, check_finite, check_positive
+from ._robot import as_float, check_finite, check_positive, check_scalar
 
 MODES = ("length", "tension")
 DEFAULT_GUIDES = tuple(np.linspace(0.0, 1.0, 11).tolist())
@@ -85,6 +85,8 @@ class Tendon(eqx.Module):
             raise ValueError(f"Tendon.guides must be s values in [0, 1], got {self.guides}")
         if self.mode not in MODES:
             raise ValueError(f"Tendon.mode must be one of {MODES}, got {self.mode!r}")
+        for field in ("angle", "offset"):
+            check_scalar(f"Tendon.{field}", getattr(self, field))
         check_finite("Tendon.angle", self.angle)
         check_positive("Tendon.offset", self.offset, allow_zero=True)
         if self.offset_end is not None:
