@@ -61,6 +61,10 @@ class StrainModel(eqx.Module):
         """Whether ``u_z`` can be non-zero (then the torsion energy is integrated)."""
         return False
 
+    def strain_degree(self) -> int:
+        """Polynomial degree of the strain in ``s`` (the elastic energy has twice that)."""
+        return 0
+
     def exact_rotation_substeps(self) -> int:
         """Magnus sub-steps per segment that integrate this model's rotation exactly (or well)."""
         return 1
@@ -160,6 +164,9 @@ class PAC(_PlanarCurvature):
     def dofs_per_segment(self):
         return 4
 
+    def strain_degree(self):
+        return 1
+
     def coordinate_names(self):
         return ("c0", "c1", "phi", "dL")
 
@@ -198,6 +205,9 @@ class PolynomialCurvature(StrainModel):
 
     def has_twist_strain(self):
         return self.twist
+
+    def strain_degree(self):
+        return self.order
 
     def exact_rotation_substeps(self):
         # The bending plane may turn, so the Magnus series does not truncate: sub-step.
