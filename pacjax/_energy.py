@@ -93,4 +93,4 @@ def moment_cotangent(
 
     Virtual work ``M . dtheta`` with ``[dtheta]x = dR R^T`` gives ``Q_j = 1/2 <dR/dq_j, [M]x R>``.
     """
-    return 0.5 * hat(moment_world) @ jax.lax.stop_gradient(rotation)
+    return 0.5 * hat(moment_world) @ rotation

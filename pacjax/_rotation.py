@@ -82,14 +82,14 @@ def rotate(omega: Float[Array, "3"], v: Float[Array, "3"]) -> Float[Array, "3"]:
 
 
 def matmul3(a: Float[Array, "*b 3 3"], b: Float[Array, "*b 3 3"]) -> Float[Array, "*b 3 3"]:
-    """``a @ b`` for stacks of 3x3 matrices as multiply-and-sum.
+    """``a @ b`` for stacks of 3x3 matrices.
 
-    XLA:CPU runs batched tiny ``dot_general`` s as one small GEMM per matrix, which neither
-    fuses nor vectorises over the batch; elementwise products do both.
+    (A multiply-and-sum form was tried for XLA:CPU batching; its float32 Hessian crashed XLA
+    with a segmentation fault, so this stays a plain matmul.)
     """
-    return jnp.sum(a[..., :, :, None] * b[..., None, :, :], axis=-2)
+    return a @ b
 
 
 def matvec3(a: Float[Array, "*b 3 3"], v: Float[Array, "*b 3"]) -> Float[Array, "*b 3"]:
-    """``a @ v`` for stacks of 3x3 matrices and vectors (multiply-and-sum, see matmul3)."""
-    return jnp.sum(a * v[..., None, :], axis=-1)
+    """``a @ v`` for stacks of 3x3 matrices and vectors."""
+    return jnp.einsum("...ij,...j->...i", a, v)

@@ -187,10 +187,14 @@ class Scene(eqx.Module):
         return scale.reshape(-1)
 
     def elastic_stiffness_diagonal(self, dtype=float) -> Float[Array, " n_dofs"]:
-        """Diagonal of the elastic Hessian at the straight rest configuration (> 0)."""
+        """Stiffness scale per coordinate: the diagonal of the elastic Hessian at rest (> 0).
+
+        Used to scale the residual and as the damping of the flow. A coordinate that is not a
+        strain (PAC's bending-plane angle) takes the scale the model gives it.
+        """
         q0 = jnp.zeros(self.n_dofs, dtype)
-        hess = jax.hessian(self.elastic_energy)(q0)
-        return jnp.diag(hess)
+        diag = jnp.diag(jax.hessian(self.elastic_energy)(q0))
+        return self.model.stiffness_scale(self.coordinates(diag)).reshape(-1)
 
     # ----------------------------------------------------------------------------- kinematics
     def frames(self, q, segment, s):
@@ -297,12 +301,12 @@ class Scene(eqx.Module):
         cot_rot = jnp.zeros_like(rot)
         if followers:
             local = jnp.stack([f.force for f in followers]).astype(dtype)
-            world = matvec3(jax.lax.stop_gradient(rot[: len(followers)]), local)
+            world = matvec3(rot[: len(followers)], local)
             cot_pos = cot_pos.at[: len(followers)].set(world)
         for k, m in enumerate(moments, start=len(followers)):
             moment = m.moment.astype(dtype)
             if m.follower:
-                moment = jax.lax.stop_gradient(rot[k]) @ moment
+                moment = rot[k] @ moment
             cot_rot = cot_rot.at[k].set(moment_cotangent(moment, rot[k]))
         (generalised,) = pullback((cot_rot, cot_pos))
         return generalised

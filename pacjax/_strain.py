@@ -61,6 +61,10 @@ class StrainModel(eqx.Module):
         """Whether ``u_z`` can be non-zero (then the torsion energy is integrated)."""
         return False
 
+    def stiffness_scale(self, diagonal: Float[Array, "n d"]) -> Float[Array, "n d"]:
+        """Per-coordinate stiffness scale from the elastic Hessian's diagonal (default: as is)."""
+        return diagonal
+
     def strain_degree(self) -> int:
         """Polynomial degree of the strain in ``s`` (the elastic energy has twice that)."""
         return 0
@@ -96,13 +100,13 @@ class _PlanarCurvature(StrainModel):
 
         With ``frame="paper"`` the frame is twisted by ``phi``: a real torsion, factor 1 (the
         paper's ``k_torsion``). With the torsion-free frame ``phi`` is only the direction of the
-        bending plane; its stiffness is a regulariser (default 1e-3, energy
+        bending plane; its stiffness is a regulariser (default 1e-6, energy
         ``k (1 - cos phi)``) that keeps the Hessian regular at zero curvature, where ``phi`` is
         undefined, while biasing the plane of a bent segment by a relative amount of that order.
         """
         if self.phi_stiffness is not None:
             return self.phi_stiffness
-        return 1.0 if self.frame == "paper" else 1e-3
+        return 1.0 if self.frame == "paper" else 1e-6
 
     @abc.abstractmethod
     def _curvature(self, q: Float[Array, " d"], s: Float[Array, ""]) -> Float[Array, ""]: ...
@@ -116,6 +120,12 @@ class _PlanarCurvature(StrainModel):
         phi = q[-2]
         # R = Rz(phi) Ry(alpha) Rz(-phi): bending about the fixed axis (-sin phi, cos phi, 0).
         return jnp.stack([-c * jnp.sin(phi), c * jnp.cos(phi), zero])
+
+    def stiffness_scale(self, diagonal):
+        # The force on the bending-plane angle is a bending moment times the curvature: scale
+        # phi like c0, not by its (regularising) stiffness, or round-off in that force would be
+        # amplified a million-fold in the scaled residual.
+        return diagonal.at[:, -2].set(jnp.maximum(diagonal[:, -2], diagonal[:, 0]))
 
     def base_rotation(self, q):
         if self.frame == "paper":

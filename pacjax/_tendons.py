@@ -164,7 +164,8 @@ class TendonRouting:
         dtype = segment_lengths.dtype
         offsets = self.local_offsets(tendons, dtype)
         seg_start = jnp.concatenate([jnp.zeros(1, dtype), jnp.cumsum(segment_lengths)])
-        axial = seg_start[self.point_segment] + segment_lengths[self.point_segment] * self.point_s
+        s = jnp.asarray(self.point_s, dtype)
+        axial = seg_start[self.point_segment] + segment_lengths[self.point_segment] * s
         points = offsets.at[:, 2].set(axial)
         return self.lengths(points)
 
