@@ -26,6 +26,8 @@ TOL = 1e-12  # tight, so that finite differences of solves are accurate
 OPTIONS = dict(tol=TOL, fallback=False)
 PARAMS = ("controls", "gain", "bending_stiffness", "mass", "force")
 TIP_WEIGHTS = np.array([1.0, -2.0, 0.5])
+# Finite-difference steps are 1e-5 relative, or 1e-5 of these sizes for small values.
+FD_FLOOR = {"controls": 1e-2, "gain": 1e2, "bending_stiffness": 1e-3, "mass": 1e-2, "force": 0.1}
 
 
 def _f64(x):
@@ -119,7 +121,7 @@ def reference():
         base = np.asarray(BASE_PARAMS[name], float)
         cols_q, cols_loss = [], []
         for i in np.ndindex(base.shape):
-            h = 1e-5 * max(abs(base[i]), 1e-2 if name == "controls" else 1.0)
+            h = 1e-5 * max(abs(base[i]), FD_FLOOR[name])
             values = []
             for sign in (1.0, -1.0):
                 shifted = base.copy()
@@ -275,8 +277,8 @@ def test_float32_solve_agrees_with_float64(reference):
     q_err = np.abs(np.asarray(out["q"]) - np.asarray(eq64.q)).max()
     tip_err = np.abs(np.asarray(out["tip"]) - np.asarray(_tip(BASE, eq64.q))).max()
     print(f"float32 (tol 1e-4): max |dq| = {q_err:.2e}, tip error = {tip_err:.2e} m")
-    # Measured (before the crash, at 1d59954): |dq| = 2.8e-4, tip 4.3e-6 m; with tol 1e-5,
-    # 6.3e-7 and 6e-8 m; tol 1e-6 is below float32's floor (reported as not converged).
+    # Measured: |dq| = 2.8e-4, tip 4.3e-6 m; with tol 1e-5, 6.3e-7 and 6e-8 m; tol 1e-6 is
+    # below float32's floor here (reported as not converged).
     assert q_err < 1e-3
     assert tip_err < 2e-5
 
