@@ -196,7 +196,7 @@ def check_controls(scene: Scene, controls, dtype, batched: bool = False) -> jax.
     if controls is None:
         return scene.default_controls(dtype)
     arr = np.asarray(controls, dtype=float) if not isinstance(controls, jax.core.Tracer) else None
-    shape = jnp.shape(controls)
+    shape = arr.shape if arr is not None else jnp.shape(controls)
     want = ("batch", scene.n_tendons) if batched else (scene.n_tendons,)
     if len(shape) != len(want) or shape[-1] != scene.n_tendons:
         hint = " (use pacjax.solve_batch for many commands)" if len(shape) > len(want) else ""
@@ -219,7 +219,7 @@ def check_controls(scene: Scene, controls, dtype, batched: bool = False) -> jax.
 def check_q(scene: Scene, q, dtype) -> jax.Array:
     if q is None:
         return scene.zeros(dtype)
-    shape = jnp.shape(q)
+    shape = np.shape(q) if not isinstance(q, jax.core.Tracer) else jnp.shape(q)
     if shape != (scene.n_dofs,):
         raise ValueError(f"q0 must have shape ({scene.n_dofs},), got {shape}")
     if not isinstance(q, jax.core.Tracer) and not np.all(np.isfinite(np.asarray(q, float))):
