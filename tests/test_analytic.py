@@ -53,13 +53,7 @@ PLANAR_MODELS = [
     pytest.param(pj.PAC(frame="paper"), id="PAC-paper"),
 ]
 POLYNOMIAL_MODELS = [
-    # Known defect (session note of 2026-11-25): with a twist strain and a dead moment about a
-    # tilted axis, continuation stalls at a scaled residual ~1e-4 (max steps) for this model.
-    pytest.param(
-        pj.PolynomialCurvature(3, twist=True),
-        id="poly3-twist",
-        marks=pytest.mark.xfail(strict=True, reason="continuation stalls (residual 1e-4)"),
-    ),
+    pytest.param(pj.PolynomialCurvature(3, twist=True), id="poly3-twist"),
     _slow("poly1", pj.PolynomialCurvature(1)),
     _slow("poly2", pj.PolynomialCurvature(2)),
     _slow("poly3", pj.PolynomialCurvature(3)),
@@ -129,7 +123,11 @@ def solve(scene, **kwargs):
 
 
 @pytest.mark.parametrize("model", PLANAR_MODELS + POLYNOMIAL_MODELS)
-def test_end_moment_gives_circular_arc(model):
+def test_end_moment_gives_circular_arc(model, request):
+    if request.node.callspec.id == "poly3-twist":
+        # Known defect (session note of 2026-11-25): with a twist strain, continuation stalls
+        # at a scaled residual ~1e-4 (max steps) on one of the tip angles.
+        request.applymarker(pytest.mark.xfail(strict=True, reason="continuation stalls"))
     axis = np.array([0.0, 1.0, 0.0])  # bends towards +x (the base frame's x axis)
     for tip_angle in TIP_ANGLES:
         moment = tip_angle * EI / LENGTH
