@@ -220,8 +220,11 @@ class PolynomialCurvature(StrainModel):
         return self.order
 
     def exact_rotation_substeps(self):
-        # The bending plane may turn, so the Magnus series does not truncate: sub-step.
-        return 4 if self.order >= 1 or self.twist else 1
+        # The bending plane may turn, so the Magnus series does not truncate: sub-step. Two
+        # Gauss points per step integrate a cubic exactly; past that, halve the steps.
+        if self.order == 0 and not self.twist:
+            return 1
+        return 4 if self.order <= 3 else 8
 
     def strain(self, q, s):
         n = self.order + 1
