@@ -10,7 +10,7 @@ import equinox as eqx
 import numpy as np
 from jaxtyping import Array, Float
 
-from ._robot import as_float, check_finite, check_positive, check_scalar, concrete
+from ._robot import check_finite, check_positive, check_scalar, concrete, float_field
 
 
 def _check_site(owner: str, segment, s) -> None:
@@ -22,6 +22,11 @@ def _check_site(owner: str, segment, s) -> None:
         raise ValueError(f"{owner}.s must lie in [0, 1], got {s}")
 
 
+def _check_flag(name: str, value) -> None:
+    if not isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"{name} must be True or False, got {value!r}")
+
+
 def _check_vector(name: str, v) -> None:
     if v.shape != (3,):
         raise ValueError(f"{name} must have shape (3,), got {v.shape}")
@@ -31,8 +36,10 @@ def _check_vector(name: str, v) -> None:
 class Gravity(eqx.Module):
     """Uniform gravity: acceleration ``g`` (m/s^2) along the unit ``direction`` (world frame)."""
 
-    g: Float[Array, ""] = eqx.field(converter=as_float, default=9.81)
-    direction: Float[Array, "3"] = eqx.field(converter=as_float, default=(0.0, 0.0, -1.0))
+    g: Float[Array, ""] = eqx.field(converter=float_field("Gravity.g"), default=9.81)
+    direction: Float[Array, "3"] = eqx.field(
+        converter=float_field("Gravity.direction"), default=(0.0, 0.0, -1.0)
+    )
 
     def __check_init__(self):
         check_scalar("Gravity.g", self.g)
@@ -50,9 +57,9 @@ class Gravity(eqx.Module):
 class PointMass(eqx.Module):
     """A mass (kg) attached at ``(segment, s)``, e.g. a tip payload or an end ring."""
 
-    mass: Float[Array, ""] = eqx.field(converter=as_float)
+    mass: Float[Array, ""] = eqx.field(converter=float_field("PointMass.mass"))
     segment: int = eqx.field(static=True)
-    s: Float[Array, ""] = eqx.field(converter=as_float, default=1.0)
+    s: Float[Array, ""] = eqx.field(converter=float_field("PointMass.s"), default=1.0)
 
     def __check_init__(self):
         check_scalar("PointMass.mass", self.mass)
@@ -65,27 +72,29 @@ class PointForce(eqx.Module):
     cross-section frame so that it turns with the body (a load cell held perpendicular to the
     backbone is ``follower=True`` with a force along local x or y)."""
 
-    force: Float[Array, "3"] = eqx.field(converter=as_float)
+    force: Float[Array, "3"] = eqx.field(converter=float_field("PointForce.force"))
     segment: int = eqx.field(static=True)
-    s: Float[Array, ""] = eqx.field(converter=as_float, default=1.0)
+    s: Float[Array, ""] = eqx.field(converter=float_field("PointForce.s"), default=1.0)
     follower: bool = eqx.field(static=True, default=False)
 
     def __check_init__(self):
         _check_vector("PointForce.force", self.force)
         _check_site("PointForce", self.segment, self.s)
+        _check_flag("PointForce.follower", self.follower)
 
 
 class PointMoment(eqx.Module):
     """A moment (N m) at ``(segment, s)``, in the world frame or (``follower=True``) local."""
 
-    moment: Float[Array, "3"] = eqx.field(converter=as_float)
+    moment: Float[Array, "3"] = eqx.field(converter=float_field("PointMoment.moment"))
     segment: int = eqx.field(static=True)
-    s: Float[Array, ""] = eqx.field(converter=as_float, default=1.0)
+    s: Float[Array, ""] = eqx.field(converter=float_field("PointMoment.s"), default=1.0)
     follower: bool = eqx.field(static=True, default=False)
 
     def __check_init__(self):
         _check_vector("PointMoment.moment", self.moment)
         _check_site("PointMoment", self.segment, self.s)
+        _check_flag("PointMoment.follower", self.follower)
 
 
 Load = Gravity | PointMass | PointForce | PointMoment

@@ -11,11 +11,38 @@ from jaxtyping import Array, Float
 _POISSON_RATIO = 0.5
 
 
-def as_float(x) -> Array:
-    """A parameter as a float array (float64 unless the value already is a float32 array)."""
-    if isinstance(x, (jnp.ndarray, np.ndarray)) and jnp.issubdtype(x.dtype, jnp.floating):
-        return jnp.asarray(x)
-    return jnp.asarray(x, dtype=float)
+def as_float(x, name: str = "parameter") -> Array:
+    """A parameter as a float array (float64 unless the value already is a float32 array).
+
+    Raises a TypeError naming ``name`` for anything that is not real numbers (a string, None,
+    a boolean, a complex number), instead of numpy's anonymous conversion error.
+    """
+    if isinstance(x, (jnp.ndarray, np.ndarray)):
+        if jnp.issubdtype(x.dtype, jnp.floating):
+            return jnp.asarray(x)
+        if not (jnp.issubdtype(x.dtype, jnp.integer) and x.dtype != bool):
+            raise TypeError(f"{name} must be real numbers, got an array of dtype {x.dtype}")
+        return jnp.asarray(x, dtype=float)
+    if isinstance(x, (bool, np.bool_)) or x is None or np.iscomplexobj(x):
+        raise TypeError(f"{name} must be a real number, got {x!r}")
+    try:
+        arr = np.asarray(x)
+    except (TypeError, ValueError) as err:  # ragged nesting
+        raise TypeError(f"{name} must be a real number or an array of them, got {x!r}") from err
+    if arr.dtype == bool or not (
+        jnp.issubdtype(arr.dtype, jnp.floating) or jnp.issubdtype(arr.dtype, jnp.integer)
+    ):
+        raise TypeError(f"{name} must be a real number or an array of them, got {x!r}")
+    return jnp.asarray(arr, dtype=float)
+
+
+def float_field(name: str):
+    """An ``eqx.field`` converter that makes a float array and names the field on bad input."""
+
+    def convert(x):
+        return as_float(x, name)
+
+    return convert
 
 
 def concrete(x) -> np.ndarray | None:
@@ -66,9 +93,10 @@ class ExponentialStiffening(StiffeningLaw):
     stiffer at a contraction of a fraction ``f`` of its length.
     """
 
-    rate: Float[Array, ""] = eqx.field(converter=as_float)
+    rate: Float[Array, ""] = eqx.field(converter=float_field("ExponentialStiffening.rate"))
 
     def __check_init__(self):
+        check_scalar("ExponentialStiffening.rate", self.rate)
         check_finite("ExponentialStiffening.rate", self.rate)
 
     def __call__(self, elongation, length):
@@ -92,12 +120,18 @@ class Segment(eqx.Module):
         stiffening: a :class:`StiffeningLaw` for ``EI`` against contraction; None: constant.
     """
 
-    length: Float[Array, ""] = eqx.field(converter=as_float)
-    bending_stiffness: Float[Array, ""] = eqx.field(converter=as_float)
-    axial_stiffness: Float[Array, ""] = eqx.field(converter=as_float)
-    torsion_stiffness: Float[Array, ""] = eqx.field(converter=as_float, default=None)
-    linear_density: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
-    radius: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    length: Float[Array, ""] = eqx.field(converter=float_field("Segment.length"))
+    bending_stiffness: Float[Array, ""] = eqx.field(
+        converter=float_field("Segment.bending_stiffness")
+    )
+    axial_stiffness: Float[Array, ""] = eqx.field(converter=float_field("Segment.axial_stiffness"))
+    torsion_stiffness: Float[Array, ""] = eqx.field(
+        converter=float_field("Segment.torsion_stiffness"), default=None
+    )
+    linear_density: Float[Array, ""] = eqx.field(
+        converter=float_field("Segment.linear_density"), default=0.0
+    )
+    radius: Float[Array, ""] = eqx.field(converter=float_field("Segment.radius"), default=0.0)
     radius_tip: Float[Array, ""] | None = None
     stiffening: StiffeningLaw | None = None
 
@@ -116,11 +150,15 @@ class Segment(eqx.Module):
         self.bending_stiffness = bending_stiffness
         self.axial_stiffness = axial_stiffness
         if torsion_stiffness is None:
-            torsion_stiffness = as_float(bending_stiffness) / (1.0 + _POISSON_RATIO)
+            torsion_stiffness = as_float(bending_stiffness, "Segment.bending_stiffness") / (
+                1.0 + _POISSON_RATIO
+            )
         self.torsion_stiffness = torsion_stiffness
         self.linear_density = linear_density
         self.radius = radius
-        self.radius_tip = None if radius_tip is None else as_float(radius_tip)
+        if radius_tip is not None:
+            radius_tip = as_float(radius_tip, "Segment.radius_tip")
+        self.radius_tip = radius_tip
         self.stiffening = stiffening
 
     def __check_init__(self):
@@ -172,11 +210,18 @@ class Robot(eqx.Module):
     """
 
     segments: tuple[Segment, ...]
-    base_rotation: Float[Array, "3 3"] = eqx.field(converter=as_float)
-    base_position: Float[Array, "3"] = eqx.field(converter=as_float)
+    base_rotation: Float[Array, "3 3"] = eqx.field(converter=float_field("Robot.base_rotation"))
+    base_position: Float[Array, "3"] = eqx.field(converter=float_field("Robot.base_position"))
 
     def __init__(self, segments, base_rotation=None, base_position=None):
-        self.segments = tuple(segments)
+        try:
+            if isinstance(segments, Segment):
+                raise TypeError
+            self.segments = tuple(segments)
+        except TypeError:
+            raise TypeError(
+                f"Robot.segments must be a sequence of Segments, got {type(segments).__name__}"
+            ) from None
         self.base_rotation = np.eye(3) if base_rotation is None else base_rotation
         self.base_position = np.zeros(3) if base_position is None else base_position
 

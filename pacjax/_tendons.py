@@ -17,10 +17,20 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from ._robot import as_float, check_finite, check_positive, check_scalar
+from ._robot import as_float, check_finite, check_positive, check_scalar, float_field
 
 MODES = ("length", "tension")
 DEFAULT_GUIDES = tuple(np.linspace(0.0, 1.0, 11).tolist())
+
+
+def _static_float(name: str, value) -> float:
+    """A static (routing) number as a Python float, naming ``name`` on bad input."""
+    if isinstance(value, (bool, np.bool_, str, bytes)) or np.ndim(value) != 0:
+        raise TypeError(f"{name} must hold plain numbers, got {value!r}")
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        raise TypeError(f"{name} must hold plain numbers, got {value!r}") from None
 
 
 class Tendon(eqx.Module):
@@ -43,8 +53,8 @@ class Tendon(eqx.Module):
     """
 
     segment: int = eqx.field(static=True)
-    angle: Float[Array, ""] = eqx.field(converter=as_float)
-    offset: Float[Array, ""] = eqx.field(converter=as_float)
+    angle: Float[Array, ""] = eqx.field(converter=float_field("Tendon.angle"))
+    offset: Float[Array, ""] = eqx.field(converter=float_field("Tendon.offset"))
     s: float = eqx.field(static=True, default=1.0)
     offset_end: Float[Array, ""] | None = None
     bowden: bool = eqx.field(static=True, default=False)
@@ -69,12 +79,18 @@ class Tendon(eqx.Module):
         self.segment = int(segment)
         self.angle = angle
         self.offset = offset
-        self.s = float(s)
-        self.offset_end = None if offset_end is None else as_float(offset_end)
+        self.s = _static_float("Tendon.s", s)
+        self.offset_end = None if offset_end is None else as_float(offset_end, "Tendon.offset_end")
+        if not isinstance(bowden, (bool, np.bool_)):
+            raise TypeError(f"Tendon.bowden must be True or False, got {bowden!r}")
         self.bowden = bool(bowden)
-        self.guides = DEFAULT_GUIDES if guides is None else tuple(float(g) for g in guides)
+        if guides is None:
+            guides = DEFAULT_GUIDES
+        elif isinstance(guides, (str, bytes)) or not np.iterable(guides):
+            raise TypeError(f"Tendon.guides must be a sequence of s values, got {guides!r}")
+        self.guides = tuple(_static_float("Tendon.guides", g) for g in guides)
         self.mode = mode
-        self.gain = None if gain is None else as_float(gain)
+        self.gain = None if gain is None else as_float(gain, "Tendon.gain")
 
     def __check_init__(self):
         if self.segment < 0:
@@ -90,10 +106,12 @@ class Tendon(eqx.Module):
         check_finite("Tendon.angle", self.angle)
         check_positive("Tendon.offset", self.offset, allow_zero=True)
         if self.offset_end is not None:
+            check_scalar("Tendon.offset_end", self.offset_end)
             check_positive("Tendon.offset_end", self.offset_end, allow_zero=True)
-        if self.mode == "length":
-            if self.gain is None:
-                raise ValueError("Tendon.gain (kappa_P, N/m) is required for a length-mode tendon")
+        if self.mode == "length" and self.gain is None:
+            raise ValueError("Tendon.gain (kappa_P, N/m) is required for a length-mode tendon")
+        if self.gain is not None:  # checked in tension mode too: a NaN is never silently kept
+            check_scalar("Tendon.gain", self.gain)
             check_positive("Tendon.gain", self.gain)
 
     def route(self) -> list[tuple[int, float]]:

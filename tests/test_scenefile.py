@@ -294,6 +294,41 @@ MALFORMED = {
         ["segments[0].stiffening.type", "'linear'"],
     ),
     "zero repeat": (BASE + "repeat = 0\n", ["segments[0].repeat", ">= 1"]),
+    # issue 6: non-finite numbers, zero sizes, ranges, types and names
+    "nan length": (BASE.replace("0.1", "nan"), ["segments[0].length", "non-finite"]),
+    "inf stiffness": (BASE.replace("0.02", "inf"), ["segments[0].bending_stiffness", "non-finite"]),
+    "zero length": (BASE.replace("0.1", "0.0"), ["segments[0]", "Segment.length", "> 0"]),
+    "zero bending stiffness": (
+        BASE.replace("0.02", "0"),
+        ["segments[0]", "Segment.bending_stiffness", "> 0"],
+    ),
+    "nan guide": (BASE + TENDON + "guides = [0.0, nan]\n", ["tendons[0].guides", "numbers"]),
+    "guide below zero": (BASE + TENDON + "guides = [-0.5, 1.0]\n", ["tendons[0]", "[0, 1]"]),
+    "anchor outside": (BASE + TENDON + "s = 1.5\n", ["tendons[0]", "Tendon.s", "(0, 1]"]),
+    "inf payload": (
+        BASE + '[[loads]]\ntype = "gravity"\n[[loads]]\ntype = "point_mass"\nmass = inf\n'
+        "segment = 0\n",
+        ["loads[1].mass", "non-finite"],
+    ),
+    "nan control": ("controls = [nan]\n" + BASE + TENDON, ["controls", "list of numbers"]),
+    "nan tension-mode gain": (
+        BASE + TENDON.replace("gain = 1e4", 'mode = "tension"\ngain = nan'),
+        ["tendons[0].gain", "non-finite"],
+    ),
+    "model name not a string": (BASE + "[model]\ntype = 3\n", ["model.type", "expected a string"]),
+    "model as a string": ('model = "PAC"\n' + BASE, ["model", "must be a table"]),
+    "model without type": (BASE + "[model]\nframe = 'paper'\n", ["model.type", "missing"]),
+    "key of another model": (
+        BASE + "[model]\ntype = 'PAC'\norder = 2\n",
+        ["model", "unknown key(s) 'order'"],
+    ),
+    "segments not tables": ("segments = 1\n", ["segments", "array of tables"]),
+    "string follower": (
+        BASE + '[[loads]]\ntype = "point_force"\nforce = [1, 0, 0]\nsegment = 0\n'
+        'follower = "yes"\n',
+        ["loads[0].follower", "true or false"],
+    ),
+    "empty file": ("", ["missing [[segments]]"]),
 }
 
 

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 import pacjax as pj
+import pacjax._batch as batch_module
 import pacjax._equilibrium as equilibrium_module
 
 NAN, INF = math.nan, math.inf
@@ -25,6 +26,7 @@ def no_solver(monkeypatch):
         raise AssertionError("the solver was reached: the input was not rejected beforehand")
 
     monkeypatch.setattr(equilibrium_module, "_solve", spy)
+    monkeypatch.setattr(batch_module, "_solve_chunk", spy)
 
 
 def _segment(**overrides):
@@ -340,3 +342,152 @@ def test_preset_arguments():
         pj.presets.stella2023(mount="sideways")
     with pytest.raises(ValueError, match="n_sections"):
         pj.presets.stella2023(n_sections=0)
+
+
+# ------------------------------------------------------------------------------ types (issue 6)
+NOT_NUMBERS = ["stiff", None, True, 1.0 + 2.0j, [0.1, "a"]]
+
+
+@pytest.mark.parametrize("value", NOT_NUMBERS, ids=["str", "None", "bool", "complex", "mixed"])
+@pytest.mark.parametrize("field", ["length", "bending_stiffness", "axial_stiffness", "radius"])
+def test_segment_parameters_must_be_real_numbers(field, value):
+    with pytest.raises(TypeError, match=f"Segment.{field}"):
+        _segment(**{field: value})
+
+
+def test_segment_taper_and_stiffening_types():
+    with pytest.raises(TypeError, match="Segment.radius_tip"):
+        _segment(radius=0.01, radius_tip="thin")
+    with pytest.raises(ValueError, match="ExponentialStiffening.rate must be a single number"):
+        pj.ExponentialStiffening([1.0, 2.0])
+    with pytest.raises(TypeError, match="ExponentialStiffening.rate"):
+        pj.ExponentialStiffening("fast")
+
+
+def test_robot_types():
+    with pytest.raises(TypeError, match="Robot.segments must be a sequence"):
+        pj.Robot(_segment())
+    with pytest.raises(TypeError, match="Robot.base_rotation"):
+        pj.Robot([_segment()], base_rotation="identity")
+    with pytest.raises(TypeError, match="Robot.base_position"):
+        pj.Robot([_segment()], base_position=[0.0, None, 0.0])
+
+
+def test_tendon_types_and_shapes():
+    with pytest.raises(TypeError, match="Tendon.s"):
+        pj.Tendon(0, 0.0, 0.01, s="tip", gain=1.0)
+    with pytest.raises(TypeError, match="Tendon.guides must be a sequence"):
+        pj.Tendon(0, 0.0, 0.01, guides=0.5, gain=1.0)
+    with pytest.raises(TypeError, match="Tendon.guides"):
+        pj.Tendon(0, 0.0, 0.01, guides=(0.0, "half"), gain=1.0)
+    with pytest.raises(TypeError, match="Tendon.bowden"):
+        pj.Tendon(0, 0.0, 0.01, bowden="no", gain=1.0)
+    with pytest.raises(TypeError, match="Tendon.angle"):
+        pj.Tendon(0, "north", 0.01, gain=1.0)
+    with pytest.raises(TypeError, match="Tendon.offset"):
+        pj.Tendon(0, 0.0, None, gain=1.0)
+    with pytest.raises(ValueError, match="Tendon.gain must be a single number"):
+        pj.Tendon(0, 0.0, 0.01, gain=[1.0, 2.0])
+    with pytest.raises(ValueError, match="Tendon.offset_end must be a single number"):
+        pj.Tendon(0, 0.0, 0.01, offset_end=[0.01, 0.02], gain=1.0)
+    # A gain given to a tension-mode tendon is unused, but a NaN there is still an error.
+    with pytest.raises(ValueError, match="Tendon.gain must be finite"):
+        pj.Tendon(0, 0.0, 0.01, mode="tension", gain=NAN)
+
+
+def test_load_types():
+    with pytest.raises(TypeError, match="PointMass.mass"):
+        pj.PointMass("heavy", 0)
+    with pytest.raises(TypeError, match="PointMass.s"):
+        pj.PointMass(0.1, 0, "tip")
+    with pytest.raises(TypeError, match="PointForce.force"):
+        pj.PointForce("up", 0)
+    with pytest.raises(TypeError, match="PointForce.follower"):
+        pj.PointForce((1.0, 0.0, 0.0), 0, follower="yes")
+    with pytest.raises(TypeError, match="PointMoment.follower"):
+        pj.PointMoment((1.0, 0.0, 0.0), 0, follower=1)
+    with pytest.raises(TypeError, match="Gravity.g"):
+        pj.Gravity(g="earth")
+    with pytest.raises(ValueError, match="Gravity.g must be finite"):
+        pj.Gravity(g=INF)
+
+
+def test_scene_containers_and_counts():
+    robot = pj.Robot([_segment()])
+    with pytest.raises(TypeError, match="Scene.tendons must be a sequence of Tendons, got Tendon"):
+        pj.Scene(robot, pj.PCC(), tendons=pj.Tendon(0, 0.0, 0.01, gain=1.0))
+    with pytest.raises(TypeError, match="Scene.loads must be a sequence of loads, got Gravity"):
+        pj.Scene(robot, pj.PCC(), loads=pj.Gravity())
+    for bad in (8.7, "8", True):
+        with pytest.raises(TypeError, match="Scene.quadrature_points must be an integer"):
+            pj.Scene(robot, pj.PCC(), quadrature_points=bad)
+    with pytest.raises(TypeError, match="Scene.rotation_substeps must be an integer"):
+        pj.Scene(robot, pj.PCC(), rotation_substeps=2.5)
+    with pytest.raises(TypeError, match="Scene.markers must be a sequence"):
+        pj.Scene(robot, pj.PCC(), markers=5)
+    with pytest.raises(ValueError, match=r"Scene.markers\[0\]: s must lie in \[0, 1\]"):
+        pj.Scene(robot, pj.PCC(), markers=[(0, "mid")])
+    with pytest.raises(ValueError, match=r"Scene.markers\[0\]: offset"):
+        pj.Scene(robot, pj.PCC(), markers=[(0, 0.5, 0.01)])
+    with pytest.raises(ValueError, match=r"Scene.markers\[0\]: segment True"):
+        pj.Scene(robot, pj.PCC(), markers=[(True, 0.5)])
+
+
+@pytest.mark.parametrize(
+    "q, error, match",
+    [
+        (np.full(6, NAN), ValueError, "q contains NaN or infinite values"),
+        (np.array([0.0, 0.0, INF, 0.0, 0.0, 0.0]), ValueError, "q contains NaN"),
+        (np.zeros((2, 6)), ValueError, r"q must have shape \(6,\)"),
+        (np.zeros(5), ValueError, r"q must have shape \(6,\)"),
+        (["a"] * 6, TypeError, "q must be an array of real numbers"),
+        (None, TypeError, "q must be an array"),
+    ],
+    ids=["nan", "inf", "batched", "short", "strings", "None"],
+)
+def test_kinematic_queries_check_q(q, error, match):
+    scene = _scene()
+    for query in (
+        lambda: pj.backbone(scene, q),
+        lambda: pj.markers(scene, q, [(0, 0.5)]),
+        lambda: pj.tip_pose(scene, q),
+        lambda: pj.tendon_tensions(scene, q, np.zeros(2)),
+    ):
+        with pytest.raises(error, match=match):
+            query()
+
+
+def test_kinematic_query_arguments():
+    scene = _scene()
+    q = np.zeros(scene.n_dofs)
+    for bad in (2.5, "10", True):
+        with pytest.raises(TypeError, match="n_points must be an integer"):
+            pj.backbone(scene, q, bad)
+    with pytest.raises(TypeError, match="scene must be a pacjax.Scene"):
+        pj.backbone(scene.robot, q)
+    with pytest.raises(TypeError, match="sites must be a sequence"):
+        pj.markers(scene, q, "tip")
+    with pytest.raises(ValueError, match=r"sites\[0\]: s must lie"):
+        pj.markers(scene, q, [(0, "mid")])
+    with pytest.raises(ValueError, match=r"controls must have shape \(2,\)"):
+        pj.tendon_tensions(scene, q, np.zeros(3))
+    with pytest.raises(ValueError, match="controls contain NaN"):
+        pj.tendon_tensions(scene, q, [NAN, 0.0])
+    with pytest.raises(TypeError, match="dtype must be a floating dtype"):
+        pj.astype(scene, jnp.int32)
+
+
+def test_batch_inputs():
+    scene = _scene()
+    with pytest.raises(ValueError, match=r"controls_batch must have shape \(batch, 2\)"):
+        pj.solve_batch(scene, np.zeros(2))
+    with pytest.raises(ValueError, match="controls contain NaN"):
+        pj.solve_batch(scene, [[NAN, 0.0]])
+    with pytest.raises(ValueError, match=r"q0 must have shape"):
+        pj.solve_batch(scene, np.zeros((3, 2)), np.zeros((2, 6)))
+    with pytest.raises(ValueError, match="q0 contains NaN"):
+        pj.solve_batch(scene, np.zeros((1, 2)), np.full(6, NAN))
+    with pytest.raises(ValueError, match="params= needs update="):
+        pj.solve_batch(scene, np.zeros((2, 2)), params=np.zeros(2))
+    with pytest.raises(ValueError, match="leading axis of 2"):
+        pj.solve_batch(scene, np.zeros((2, 2)), params=np.zeros(3), update=lambda s, p: s)
