@@ -29,3 +29,9 @@ from ._batch import solve_batch as solve_batch
 from ._equilibrium import SolverOptions as SolverOptions
 from ._equilibrium import solve_equilibrium as solve_equilibrium
 from ._solution import Equilibrium as Equilibrium
+from ._identify import identify as identify
+from ._fitreport import IdentificationReport as IdentificationReport
+from ._mocap import MocapDataset as MocapDataset
+from ._mocap import static_frames as static_frames
+from ._synthetic import high_fidelity as high_fidelity
+from ._synthetic import synthetic_mocap as synthetic_mocap

@@ -301,5 +301,120 @@ def solve(scene_file: str, controls: str | None, out: str, no_plot: bool):
         sys.exit(3)
 
 
+# ------------------------------------------------------------------------------ fit
+def _names(text: str) -> tuple[str, ...]:
+    return tuple(x.strip() for x in text.split(",") if x.strip())
+
+
+@cli.command()
+@click.argument("scene_file", type=click.Path(exists=True, dir_okay=False))
+@click.argument("data_file", type=click.Path(exists=True, dir_okay=False))
+@click.option(
+    "--params",
+    default="bending_stiffness,mocap_transform",
+    show_default=True,
+    help="Comma-separated parameters to fit (see pacjax.identify).",
+)
+@click.option("--per-segment", default="", help="Parameters fitted per segment / tendon.")
+@click.option(
+    "--holdout",
+    default=0.2,
+    show_default=True,
+    type=click.FloatRange(0.0, 0.9),
+    help="Fraction of frames held out for validation (0: none).",
+)
+@click.option("--loss", type=click.Choice(["l2", "huber"]), default="l2", show_default=True)
+@click.option("--noise", default=1e-3, show_default=True, help="Marker noise scale, m.")
+@click.option("--max-iterations", default=50, show_default=True, type=click.IntRange(min=0))
+@click.option("--seed", default=0, show_default=True, help="Seed of the held-out split.")
+@click.option(
+    "--out",
+    default=".",
+    show_default=True,
+    type=click.Path(file_okay=False),
+    help="Directory for the fitted scene, the report and the plots.",
+)
+@click.option("--no-plot", is_flag=True, help="Skip the figures.")
+def fit(
+    scene_file,
+    data_file,
+    params,
+    per_segment,
+    holdout,
+    loss,
+    noise,
+    max_iterations,
+    seed,
+    out,
+    no_plot,
+):
+    """Fit a scene's parameters to static motion-capture frames (pacjax mocap CSV).
+
+    Writes <name>_fitted.toml, <name>_fit.json, <name>_fit.md and, unless --no-plot, the loss
+    curve, predicted vs measured backbones and an error histogram (PNG).
+    """
+    from .mocapfile import load_mocap
+    from .scenefile import load_scene, save_scene
+
+    try:
+        scene, _, extra = load_scene(scene_file)
+    except (ValueError, OSError) as err:
+        raise click.ClickException(str(err)) from None
+    with open(data_file, encoding="utf-8-sig") as f:
+        if f.readline().startswith("Format Version"):
+            raise click.ClickException(
+                f"{data_file} is a Motive export: attach the robot's commands and pick static "
+                "frames with pacjax.mocapfile.motive_dataset, then save_mocap it"
+            )
+    try:
+        data = load_mocap(data_file)
+        fitted, report = pj.identify(
+            scene,
+            data,
+            _names(params),
+            per_segment=_names(per_segment),
+            holdout=holdout,
+            seed=seed,
+            loss=loss,
+            noise=noise,
+            max_iterations=max_iterations,
+            solver_options=extra["solver"],
+        )
+    except (ValueError, TypeError) as err:
+        raise click.ClickException(str(err)) from None
+    out = _output_dir(out)
+    name = extra["name"]
+    paths = {
+        "scene": os.path.join(out, f"{name}_fitted.toml"),
+        "json": os.path.join(out, f"{name}_fit.json"),
+        "md": os.path.join(out, f"{name}_fit.md"),
+    }
+    save_scene(paths["scene"], fitted, name=f"{name} (fitted)")
+    report.to_json(paths["json"])
+    with open(paths["md"], "w", encoding="utf-8") as f:
+        f.write(report.to_markdown())
+    if not no_plot:
+        from . import fitplots
+
+        paths["loss"] = os.path.join(out, f"{name}_fit_loss.png")
+        paths["backbones"] = os.path.join(out, f"{name}_fit_backbones.png")
+        paths["errors"] = os.path.join(out, f"{name}_fit_errors.png")
+        fitplots.plot_loss(report, paths["loss"])
+        fitplots.plot_backbones(fitted, report, paths["backbones"])
+        fitplots.plot_error_histogram(report, paths["errors"])
+    click.echo(f"{name}: {report.message}; {report.iterations} iterations, {report.time_s:.1f} s")
+    for pname, p in report.parameters.items():
+        for label, value, std in zip(p["labels"], p["value"], p["std"], strict=True):
+            sd = "" if std is None else f" +- {std:.3g}"
+            click.echo(f"  {pname}{label} = {value:.6g}{sd} {p['unit']}")
+    click.echo(f"train RMSE {report.train.rmse_mm:.3f} mm ({len(report.train.q)} frames)")
+    if report.validation is not None:
+        click.echo(
+            f"held-out RMSE {report.validation.rmse_mm:.3f} mm ({len(report.validation.q)} frames)"
+        )
+    for path in paths.values():
+        click.echo(f"wrote {path}")
+
+
 if __name__ == "__main__":
     main()

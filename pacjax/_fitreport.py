@@ -1,0 +1,223 @@
+"""The report of an identification: parameter estimates, uncertainties, errors, history."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+
+import numpy as np
+
+
+@dataclasses.dataclass
+class FitErrors:
+    """Prediction errors of a fitted model on a set of frames (mocap frame, fitted transform).
+
+    Attributes:
+        frame_rmse_mm: (frames,) RMS marker distance error per frame (mm).
+        marker_rmse_mm: (m,) RMS distance error per marker (mm).
+        rmse_mm, mean_mm, max_mm: over every observed marker of every frame (mm).
+        tip_error_mm: (frames,) distance error of the most distal marker (mm; NaN if unseen).
+        orientation_error_deg: (frames, m) angle between predicted and measured rotation
+            (degrees), or None without orientation data.
+        tip_frobenius: (frames,) ``||R_pred - R_meas||_F`` at the most distal site, or None.
+        predicted, measured: (frames, m, 3) marker positions (m).
+        converged: (frames,) whether each frame's equilibrium converged.
+        q: (frames, n_dofs) the model's equilibria.
+    """
+
+    frame_rmse_mm: np.ndarray
+    marker_rmse_mm: np.ndarray
+    rmse_mm: float
+    mean_mm: float
+    max_mm: float
+    tip_error_mm: np.ndarray
+    orientation_error_deg: np.ndarray | None
+    tip_frobenius: np.ndarray | None
+    predicted: np.ndarray
+    measured: np.ndarray
+    converged: np.ndarray
+    q: np.ndarray
+
+    @staticmethod
+    def compute(predicted, measured, tip_index, converged, q, rot_pred=None, rot_meas=None):
+        dist = np.linalg.norm(predicted - measured, axis=-1) * 1e3  # NaN where unobserved
+        seen = np.isfinite(dist)
+        sq = np.where(seen, dist**2, 0.0)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            frame = np.sqrt(sq.sum(1) / seen.sum(1))
+            marker = np.sqrt(sq.sum(0) / seen.sum(0))
+        ori = frob = None
+        if rot_pred is not None and rot_meas is not None:
+            rel = np.einsum("fmji,fmjk->fmik", rot_pred, rot_meas)
+            cos = np.clip((np.trace(rel, axis1=-2, axis2=-1) - 1.0) / 2.0, -1.0, 1.0)
+            ori = np.degrees(np.arccos(cos))
+            frob = np.linalg.norm(rot_pred[:, tip_index] - rot_meas[:, tip_index], axis=(-2, -1))
+        return FitErrors(
+            frame_rmse_mm=frame,
+            marker_rmse_mm=marker,
+            rmse_mm=float(np.sqrt(sq.sum() / seen.sum())),
+            mean_mm=float(np.nanmean(dist)),
+            max_mm=float(np.nanmax(dist)),
+            tip_error_mm=dist[:, tip_index],
+            orientation_error_deg=ori,
+            tip_frobenius=frob,
+            predicted=predicted,
+            measured=measured,
+            converged=np.asarray(converged, bool),
+            q=np.asarray(q),
+        )
+
+    def summary(self) -> dict:
+        out = {
+            "frames": int(len(self.frame_rmse_mm)),
+            "rmse_mm": self.rmse_mm,
+            "mean_mm": self.mean_mm,
+            "max_mm": self.max_mm,
+            "tip_mean_mm": _nanmean(self.tip_error_mm),
+            "frame_rmse_mm": _list(self.frame_rmse_mm),
+            "marker_rmse_mm": _list(self.marker_rmse_mm),
+            "tip_error_mm": _list(self.tip_error_mm),
+            "frames_not_converged": np.flatnonzero(~self.converged).tolist(),
+        }
+        if self.orientation_error_deg is not None:
+            out["orientation_mean_deg"] = _nanmean(self.orientation_error_deg)
+            out["tip_frobenius_mean"] = _nanmean(self.tip_frobenius)
+        return out
+
+
+def _nanmean(x) -> float | None:
+    x = np.asarray(x, float)
+    return float(np.nanmean(x)) if np.isfinite(x).any() else None
+
+
+def _list(x) -> list:
+    return [float(v) if math.isfinite(v) else None for v in np.asarray(x, float).reshape(-1)]
+
+
+@dataclasses.dataclass
+class IdentificationReport:
+    """What :func:`pacjax.identify` found.
+
+    Attributes:
+        parameters: name -> ``{"unit", "labels", "initial", "value", "std", "relative_std"}``
+            (lists, one entry per fitted value; ``std`` from the Gauss-Newton / Laplace
+            covariance ``s^2 (J^T J)^-1``, ``s^2`` the residual variance per observation).
+        loss_history: normalised loss ``sum(rho(r)) / n_observations`` after every accepted
+            iteration (the first entry is the start), residuals in units of ``noise``.
+        rmse_history_mm: training marker RMSE (mm) along the same iterations.
+        train, validation: :class:`FitErrors` (validation None without held-out frames).
+        rotation, translation: the mocap transform ``x_mocap = rotation @ x_world + translation``.
+        iterations, evaluations: accepted steps, batch equilibrium evaluations.
+        converged: whether a stopping tolerance was met (not the iteration limit).
+        message: why the fit stopped.
+        covariance: covariance of the internal coordinates (log-parameters, offsets).
+        coordinate_names: names of those coordinates.
+        identifiable: False for a coordinate whose relative standard deviation exceeds 1
+            (the data do not excite it).
+        time_s: wall time of the fit; first_evaluation_s: the first batch evaluation,
+            compilation included.
+        noise: the residual scale (m) used.
+    """
+
+    parameters: dict
+    loss_history: list
+    rmse_history_mm: list
+    train: FitErrors
+    validation: FitErrors | None
+    rotation: np.ndarray
+    translation: np.ndarray
+    iterations: int
+    evaluations: int
+    converged: bool
+    message: str
+    covariance: np.ndarray
+    coordinate_names: list
+    identifiable: list
+    time_s: float
+    first_evaluation_s: float
+    noise: float
+
+    def to_dict(self) -> dict:
+        return {
+            "parameters": self.parameters,
+            "loss_history": [float(v) for v in self.loss_history],
+            "rmse_history_mm": [float(v) for v in self.rmse_history_mm],
+            "train": self.train.summary(),
+            "validation": None if self.validation is None else self.validation.summary(),
+            "mocap_transform": {
+                "rotation": np.asarray(self.rotation).tolist(),
+                "translation_m": np.asarray(self.translation).tolist(),
+            },
+            "iterations": self.iterations,
+            "evaluations": self.evaluations,
+            "converged": self.converged,
+            "message": self.message,
+            "coordinate_names": list(self.coordinate_names),
+            "identifiable": [bool(v) for v in self.identifiable],
+            "covariance": np.asarray(self.covariance).tolist(),
+            "time_s": self.time_s,
+            "first_evaluation_s": self.first_evaluation_s,
+            "noise_m": self.noise,
+        }
+
+    def to_json(self, path) -> None:
+        with open(path, "w", encoding="utf-8") as f:
+            json.dump(self.to_dict(), f, indent=2)
+            f.write("\n")
+
+    def to_markdown(self) -> str:
+        lines = ["# Identification report", ""]
+        lines.append(
+            f"{self.message}; {self.iterations} iterations, {self.evaluations} batch evaluations, "
+            f"{self.time_s:.1f} s (first evaluation, with compilation, "
+            f"{self.first_evaluation_s:.1f} s)."
+        )
+        lines += [
+            "",
+            "## Parameters",
+            "",
+            "| parameter | unit | initial | fitted | std | rel. std |",
+        ]
+        lines.append("|---|---|---|---|---|---|")
+        for name, p in self.parameters.items():
+            for label, a, b, s, r in zip(
+                p["labels"], p["initial"], p["value"], p["std"], p["relative_std"], strict=True
+            ):
+                rel = "-" if r is None else f"{100 * r:.2g} %"
+                std = "-" if s is None else f"{s:.4g}"
+                lines.append(f"| {name}{label} | {p['unit']} | {a:.6g} | {b:.6g} | {std} | {rel} |")
+        if not all(self.identifiable):
+            bad = [
+                n for n, ok in zip(self.coordinate_names, self.identifiable, strict=True) if not ok
+            ]
+            lines += ["", f"Not identified by these data (relative std > 100 %): {', '.join(bad)}."]
+        lines += ["", "## Errors (mm; markers in the mocap frame)", ""]
+        lines.append("| frames | n | RMSE | mean | max | tip mean | orientation mean (deg) |")
+        lines.append("|---|---|---|---|---|---|---|")
+        for label, e in (("train", self.train), ("held-out", self.validation)):
+            if e is None:
+                continue
+            s = e.summary()
+            ori = s.get("orientation_mean_deg")
+            lines.append(
+                f"| {label} | {s['frames']} | {s['rmse_mm']:.3f} | {s['mean_mm']:.3f} | "
+                f"{s['max_mm']:.3f} | {_fmt(s['tip_mean_mm'])} | {_fmt(ori)} |"
+            )
+        lines += [
+            "",
+            "Per-marker RMSE (mm), train: " + ", ".join(_fmt(v) for v in self.train.marker_rmse_mm),
+        ]
+        if self.validation is not None:
+            lines.append(
+                "Per-marker RMSE (mm), held-out: "
+                + ", ".join(_fmt(v) for v in self.validation.marker_rmse_mm)
+            )
+        lines += ["", "## Loss history", "", "iteration, loss, train RMSE (mm):", ""]
+        for k, (loss, rmse) in enumerate(zip(self.loss_history, self.rmse_history_mm, strict=True)):
+            lines.append(f"- {k}: {loss:.6g}, {rmse:.4f}")
+        return "\n".join(lines) + "\n"
+
+
+def _fmt(v) -> str:
+    return "-" if v is None or not np.isfinite(v) else f"{v:.3f}"
