@@ -27,6 +27,8 @@ from ._api import tip_pose as tip_pose
 from ._batch import iter_batch as iter_batch
 from ._batch import solve_batch as solve_batch
 from ._equilibrium import SolverOptions as SolverOptions
+from ._multistart import Equilibria as Equilibria
+from ._multistart import find_equilibria as find_equilibria
 from ._equilibrium import solve_equilibrium as solve_equilibrium
 from ._solution import Equilibrium as Equilibrium
 from ._identify import identify as identify
