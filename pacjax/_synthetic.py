@@ -229,7 +229,7 @@ def synthetic_mocap(
         controls,
         params=rows,
         update=frame_loads if rows is not None else None,
-        **solver_options,
+        **{"chunk_size": 16, **solver_options},
     )
     ok = np.asarray(eq.converged) & np.asarray(eq.stable)
     if not ok.any():
