@@ -20,17 +20,25 @@ import numpy as np
 
 import pacjax as pj
 
-PARAMS = ("bending_stiffness", "axial_stiffness", "linear_density", "tendon_gain", "mocap_transform")
+PARAMS = (
+    "bending_stiffness",
+    "axial_stiffness",
+    "linear_density",
+    "tendon_gain",
+    "mocap_transform",
+)
 
 
 def scaled(scene, factors):
     """The scene with bending, axial stiffness, density and gains multiplied by ``factors``."""
     fe, fa, fd, fg = factors
     scene = eqx.tree_at(
-        lambda s: [x.bending_stiffness for x in s.robot.segments]
-        + [x.axial_stiffness for x in s.robot.segments]
-        + [x.linear_density for x in s.robot.segments]
-        + [t.gain for t in s.tendons],
+        lambda s: (
+            [x.bending_stiffness for x in s.robot.segments]
+            + [x.axial_stiffness for x in s.robot.segments]
+            + [x.linear_density for x in s.robot.segments]
+            + [t.gain for t in s.tendons]
+        ),
         scene,
         [fe * x.bending_stiffness for x in scene.robot.segments]
         + [fa * x.axial_stiffness for x in scene.robot.segments]
