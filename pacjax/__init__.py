@@ -37,3 +37,11 @@ from ._mocap import MocapDataset as MocapDataset
 from ._mocap import static_frames as static_frames
 from ._synthetic import high_fidelity as high_fidelity
 from ._synthetic import synthetic_mocap as synthetic_mocap
+from . import inverse as inverse
+from .inverse import InverseResult as InverseResult
+from .inverse import Tracking as Tracking
+from .inverse import Workspace as Workspace
+from .inverse import inverse_statics as inverse_statics
+from .inverse import inverse_statics_batch as inverse_statics_batch
+from .inverse import sample_workspace as sample_workspace
+from .inverse import track as track

@@ -1,0 +1,924 @@
+"""Inverse statics: the tendon commands whose equilibrium puts the robot where the user wants it.
+
+The forward map ``u -> q*(u) -> pose`` has no closed form (the paper names this as its main
+limitation), but it is differentiable: :func:`pacjax.solve_equilibrium` gives ``dq*/du`` by the
+implicit function theorem (one linear solve at the equilibrium). The inverse problem is then a
+bounded nonlinear least-squares problem in the commands, solved with ``optimistix``'s
+Levenberg-Marquardt method. Its residual (in metres) stacks:
+
+- the target error: tip position, tip position and orientation (``orientation_weight`` metres
+  per radian), or the positions of marker sites (NaN targets are skipped);
+- a preference for low tension, ``tension_weight * T`` (m/N): among the commands that reach a
+  target (the paper's robot has 9 tendons for a 3D tip position) it picks the least taut, so
+  antagonistic tendons do not fight. The default 1e-5 m/N makes 10 N of tension cost as much
+  as 0.1 mm of error; it biases a reached target by ~5 um on the paper's robot. A solution biased
+  by more than a tenth of ``reached_tol`` is polished without it (minimum-norm Gauss-Newton
+  steps keep the low tension found). The optimum often has tendons just at the edge of slack,
+  where the tension has a kink: Levenberg-Marquardt then converges slowly there, and many
+  solves end on ``max_steps`` (median 60 on the paper's robot) with the target reached;
+- tension limits ``max_tension`` (N) as a hinge ``tension_limit_weight * max(T - T_max, 0)``;
+- the segments' contraction limit as a hinge on ``-dL - max_contraction * L`` (m).
+
+Command bounds (motor range) are exact: the solver works on ``z`` with
+``u = lower + (upper - lower) * sigmoid(z)``. The default range of a length-mode tendon is
+``[0, max_contraction * spanned length]``: with the default ``max_contraction = 0.5`` a tendon of
+the paper's robot may be pulled in by 67.7 mm, its segments' 0-70 mm contraction range. Tension
+mode tendons need ``upper`` or ``max_tension``.
+
+Each solve starts from a command (given, from the nearest sample of a :class:`Workspace`, or
+random within the bounds drawn from ``seed``) and the equilibrium there; when the error is above
+``reached_tol`` after ``max_steps`` iterations, the next start is tried (``n_starts`` in all) and
+the best result kept. A target out of reach therefore returns the closest pose found, with
+``reached=False``: it is never reported as reached. :func:`inverse_statics_batch` solves many
+targets at once (``vmap``); :func:`track` follows a path with warm starts (each waypoint starts
+from the previous commands and equilibrium), so the commands vary smoothly.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import jax.tree_util as jtu
+import numpy as np
+import optimistix as optx
+from jaxtyping import Array, Bool, Float, Int
+
+from ._batch import solve_batch
+from ._equilibrium import solve_equilibrium
+from ._rotation import matvec3
+from ._scene import Scene, normalise_sites
+
+#: Result codes of an inverse solve.
+REACHED = 0
+NOT_REACHED = 1
+NO_EQUILIBRIUM = 2
+MESSAGES = {
+    REACHED: "target reached",
+    NOT_REACHED: "target not reached: the closest pose found is returned (out of reach, or "
+    "blocked by the bounds and limits)",
+    NO_EQUILIBRIUM: "no converged, stable equilibrium at the best commands found",
+}
+
+#: The residual is expressed in this unit (m) so that its Jacobian with respect to the latent
+#: commands is of order one for robots of centimetre-to-decimetre size: Levenberg-Marquardt's
+#: first damping (1) is then neither far too strong nor too weak.
+_RESIDUAL_UNIT = 0.01
+
+#: Residual (in ``_RESIDUAL_UNIT``) that replaces the error where the inner equilibrium solve
+#: failed, so that the least-squares solver rejects the step instead of trusting it.
+_FAILED_RESIDUAL = 1e3
+
+
+# ------------------------------------------------------------------------------ results
+class InverseResult(eqx.Module):
+    """Commands that reach a target, and the pose they reach (leading batch axis when batched).
+
+    Attributes:
+        controls: (n_tendons,) commands (m pull-in, or N tension).
+        q: (n_dofs,) the equilibrium under ``controls``.
+        error: (m) position error: distance from the tip to the target, or the largest
+            distance from a marker site to its target (inf when no start gave a converged,
+            stable equilibrium).
+        orientation_error: (rad) angle between the reached and the target tip orientation
+            (0 for position targets).
+        reached: ``error <= reached_tol`` (and the orientation within ``orientation_tol``) at a
+            converged, stable equilibrium.
+        position: (3,) reached tip position (m).
+        rotation: (3, 3) reached tip orientation.
+        tensions: (n_tendons,) tendon tensions (N) at the solution.
+        iterations: Levenberg-Marquardt iterations, all starts together.
+        starts: how many starts were used.
+        converged: the equilibrium at the solution converged and is stable.
+        code: 0 reached, 1 not reached (closest pose), 2 no equilibrium; see :attr:`message`.
+    """
+
+    controls: Float[Array, "*batch n_tendons"]
+    q: Float[Array, "*batch n_dofs"]
+    error: Float[Array, "*batch"]
+    orientation_error: Float[Array, "*batch"]
+    reached: Bool[Array, "*batch"]
+    position: Float[Array, "*batch 3"]
+    rotation: Float[Array, "*batch 3 3"]
+    tensions: Float[Array, "*batch n_tendons"]
+    iterations: Int[Array, "*batch"]
+    starts: Int[Array, "*batch"]
+    converged: Bool[Array, "*batch"]
+    code: Int[Array, "*batch"]
+
+    @property
+    def message(self) -> str | list[str]:
+        """What happened, in words (a list for a batch)."""
+        codes = np.asarray(self.code)
+        if codes.ndim == 0:
+            return MESSAGES[int(codes)]
+        return [MESSAGES[int(c)] for c in codes.reshape(-1)]
+
+
+class Tracking(eqx.Module):
+    """A tracked path: an :class:`InverseResult` per waypoint, and how smooth and fast it was.
+
+    Attributes:
+        result: :class:`InverseResult` with a leading waypoint axis.
+        max_command_jump: largest change of any command between neighbouring waypoints (m, or N
+            for tension-mode tendons).
+        seconds: wall-clock time of the whole path (compilation excluded when warm).
+        waypoints_per_second: ``len(path) / seconds``.
+    """
+
+    result: InverseResult
+    max_command_jump: float = eqx.field(static=True)
+    seconds: float = eqx.field(static=True)
+    waypoints_per_second: float = eqx.field(static=True)
+
+
+class Workspace(eqx.Module):
+    """Forward-solved samples of the commands' range: the reachable tip positions, and good
+    starts for inverse solves (the nearest sample to a target).
+
+    Attributes:
+        controls: (n, n_tendons) sampled commands.
+        q: (n, n_dofs) their equilibria.
+        tip: (n, 3) tip positions (m).
+        converged: (n,) converged, stable equilibria (only those are used as starts).
+    """
+
+    controls: Float[Array, "n n_tendons"]
+    q: Float[Array, "n n_dofs"]
+    tip: Float[Array, "n 3"]
+    converged: Bool[Array, " n"]
+
+    def nearest(self, position, k: int = 1) -> np.ndarray:
+        """Indices of the ``k`` converged samples whose tips are closest to ``position``."""
+        tip = np.asarray(self.tip)
+        d = np.linalg.norm(tip - np.asarray(position, float)[..., None, :], axis=-1)
+        d = np.where(np.asarray(self.converged), d, np.inf)
+        return np.argsort(d, axis=-1)[..., :k]
+
+
+# ------------------------------------------------------------------------------ the problem
+class _Target(eqx.Module):
+    """Target and weights in arrays (traced); which kind of target is static."""
+
+    kind: str = eqx.field(static=True)  # "position" | "pose" | "markers"
+    segments: tuple[int, ...] = eqx.field(static=True)
+    s: Float[Array, " m"]
+    offsets: Float[Array, "m 3"]
+    points: Float[Array, "m 3"]  # NaN entries (missing markers) are replaced by 0 and masked
+    mask: Float[Array, "m 3"]
+    rotation: Float[Array, "3 3"]
+    orientation_weight: Float[Array, ""]
+
+
+class _Limits(eqx.Module):
+    lower: Float[Array, " n_tendons"]
+    upper: Float[Array, " n_tendons"]
+    tension_weight: Float[Array, ""]
+    max_tension: Float[Array, " n_tendons"] | None
+    tension_limit_weight: Float[Array, ""]
+    max_contraction: Float[Array, " n_segments"] | None  # m
+    contraction_weight: Float[Array, ""]
+
+
+def _commands(z, limits: _Limits):
+    return limits.lower + (limits.upper - limits.lower) * jax.nn.sigmoid(z)
+
+
+def _latent(u, limits: _Limits):
+    """``z`` with ``_commands(z) = u``; commands on a bound start just inside it."""
+    frac = (u - limits.lower) / (limits.upper - limits.lower)
+    frac = jnp.clip(frac, 1e-3, 1.0 - 1e-3)
+    return jnp.log(frac) - jnp.log1p(-frac)
+
+
+def _sites_pose(scene: Scene, target: _Target, q):
+    """Positions of the target's sites, and the tip frame."""
+    segs = np.asarray(target.segments + (scene.n_segments - 1,))
+    s = jnp.concatenate([target.s, jnp.ones(1, q.dtype)])
+    rot, pos = scene.frames(q, segs, s)
+    points = pos[:-1] + matvec3(rot[:-1], target.offsets)
+    return points, pos[-1], rot[-1]
+
+
+def _rotation_error(r_target, r):
+    """Axis times sine of the rotation from ``r_target`` to ``r`` (smooth, 0 when equal)."""
+    m = r_target.T @ r
+    return 0.5 * jnp.stack([m[2, 1] - m[1, 2], m[0, 2] - m[2, 0], m[1, 0] - m[0, 1]])
+
+
+def _angle(r_target, r):
+    m = r_target.T @ r
+    sin = jnp.linalg.norm(_rotation_error(r_target, r))
+    cos = 0.5 * (jnp.trace(m) - 1.0)
+    return jnp.arctan2(sin, cos)
+
+
+def _errors(scene, target: _Target, q):
+    """(position error (m), orientation error (rad), tip position, tip rotation)."""
+    points, tip, rot = _sites_pose(scene, target, q)
+    dist = jnp.sqrt(jnp.sum(((points - target.points) * target.mask) ** 2, axis=-1))
+    angle = _angle(target.rotation, rot) if target.kind == "pose" else jnp.zeros((), q.dtype)
+    return jnp.max(dist), angle, tip, rot
+
+
+class _Residual(eqx.Module):
+    """The least-squares residual (m) of the commands' latent ``z``; aux: ``(q, ok)``."""
+
+    options: tuple = eqx.field(static=True)
+
+    def __call__(self, z, args):
+        scene, target, limits, q0 = args
+        return _residual(scene, target, limits, q0, z, self.options)
+
+
+def _equilibrium(scene, u, q0, options):
+    """Equilibrium ``q*(u)`` with its derivative from the implicit function theorem.
+
+    The solve itself is not differentiated: ``q*`` is found with gradients stopped, and the
+    derivative ``dq*/du = -(dF/dq)^-1 dF/du`` enters through one linearised Newton step at the
+    solution, ``q = q* - A^-1 F(q*, u)`` with ``A = dF/dq(q*)`` held constant, whose value part is
+    removed again (the step is below the solver's tolerance). That is the implicit function
+    theorem with one dense solve (``n_dofs`` is small), and it compiles far faster than
+    forward-mode differentiation of the solver's own implicit adjoint, which the
+    Levenberg-Marquardt Jacobians need. The system is scaled like the solver's (coordinates by
+    their natural size, rows by the elastic stiffness), so PAC's weak bending-plane angle does
+    not spoil the solve.
+
+    Returns ``(q, ok)``; ``ok`` is False for a failed or unstable solve or a singular ``A``.
+    """
+    eq = solve_equilibrium(scene, jax.lax.stop_gradient(u), q0, fallback=False, **dict(options))
+    q_star = jax.lax.stop_gradient(eq.q)
+    dtype = q_star.dtype
+    sigma = scene.coordinate_scale(dtype)
+    row = 1.0 / (scene.elastic_stiffness_diagonal(dtype) * sigma)
+    frozen = jax.lax.stop_gradient(scene)
+    jac = jax.jacfwd(lambda y: frozen.residual(sigma * y, u) * row)(q_star / sigma)
+    jac = jax.lax.stop_gradient(jac)
+    step = sigma * jnp.linalg.solve(jac, scene.residual(q_star, u) * row)
+    finite = jnp.all(jnp.isfinite(step))
+    step = jnp.where(finite, step, 0.0)
+    q = q_star - (step - jax.lax.stop_gradient(step))
+    return q, eq.converged & eq.stable & finite
+
+
+def _residual(scene, target, limits, q0, z, options):
+    u = _commands(z, limits)
+    q, ok = _equilibrium(scene, u, q0, options)
+    points, _, rot = _sites_pose(scene, target, q)
+    parts = [((points - target.points) * target.mask).reshape(-1)]
+    if target.kind == "pose":
+        parts.append(target.orientation_weight * _rotation_error(target.rotation, rot))
+    if scene.n_tendons:
+        tension = scene.tendon_tensions(q, u)
+        parts.append(limits.tension_weight * tension)
+        if limits.max_tension is not None:
+            over = jnp.maximum(tension - limits.max_tension, 0.0)
+            parts.append(limits.tension_limit_weight * over)
+    if limits.max_contraction is not None:
+        dl = scene.coordinates(q)[:, -1]
+        parts.append(limits.contraction_weight * jnp.maximum(-dl - limits.max_contraction, 0.0))
+    r = jnp.concatenate(parts) / _RESIDUAL_UNIT
+    return jnp.where(ok, r, _FAILED_RESIDUAL), (q, ok)
+
+
+def _solve_core(scene, target, limits, u0, q0, rtol, atol, max_steps, options):
+    """One Levenberg-Marquardt solve from ``u0`` (traceable, vmappable)."""
+    solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol)
+    z0 = _latent(u0, limits)
+    sol = optx.least_squares(
+        _Residual(options),
+        solver,
+        z0,
+        args=(scene, target, limits, q0),
+        has_aux=True,
+        max_steps=max_steps,
+        throw=False,
+    )
+    u = _commands(sol.value, limits)
+    q, ok = sol.aux
+    error, angle, tip, rot = _errors(scene, target, q)
+    error = jnp.where(ok, error, jnp.inf)
+    return u, q, error, angle, tip, rot, ok, sol.stats["num_steps"]
+
+
+_solve_one = eqx.filter_jit(_solve_core)
+
+
+@eqx.filter_jit
+def _solve_many(scene, target, limits, u0, q0, rtol, atol, max_steps, options):
+    def one(t, u, q):
+        return _solve_core(scene, t, limits, u, q, rtol, atol, max_steps, options)
+
+    return jax.vmap(one)(target, u0, q0)
+
+
+@eqx.filter_jit
+def _tensions(scene, q, u):
+    return scene.tendon_tensions(q, u)
+
+
+# ------------------------------------------------------------------------------ input checks
+def _array(name, value, shape=None):
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise TypeError(f"{name} must be numbers, got {value!r}") from None
+    if shape is not None and arr.shape != shape:
+        raise ValueError(f"{name} must have shape {shape}, got {arr.shape}")
+    return arr
+
+
+def _finite(name, arr):
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} must be finite (no NaN or infinity)")
+    return arr
+
+
+def _make_target(scene, target, rotation, orientation_weight, sites, batched=False):
+    """A :class:`_Target` (with a leading batch axis when ``batched``)."""
+    lead = (-1,) if batched else ()
+    if sites is None:
+        arr = _array("target", target)
+        ok = arr.shape == (3,) if not batched else (arr.ndim == 2 and arr.shape[1:] == (3,))
+        if not ok or arr.size == 0:
+            what = "(3,) (a tip position in m)" if not batched else "(n_targets, 3)"
+            hint = "; pass sites= for marker targets" if arr.ndim >= 2 and not batched else ""
+            raise ValueError(f"target must have shape {what}, got {arr.shape}{hint}")
+        _finite("target", arr)
+        points = arr.reshape(lead + (1, 3))
+        sites = ((scene.n_segments - 1, 1.0, (0.0, 0.0, 0.0)),)
+        kind = "position" if rotation is None else "pose"
+    else:
+        sites = normalise_sites(sites, scene.n_segments, "sites")
+        if not sites:
+            raise ValueError("sites must hold at least one (segment, s) marker site")
+        if rotation is not None:
+            raise ValueError("rotation= applies to a tip target, not to marker sites")
+        arr = _array("target", target)
+        m = len(sites)
+        if arr.shape[-2:] != (m, 3) or arr.ndim != (3 if batched else 2):
+            want = f"({'n_targets, ' if batched else ''}{m}, 3)"
+            raise ValueError(f"target must have shape {want} (one xyz per site), got {arr.shape}")
+        if np.any(np.isinf(arr)):
+            raise ValueError("target must not hold infinite values (NaN marks a missing marker)")
+        if np.any(np.all(np.isnan(arr), axis=(-1, -2))):
+            raise ValueError("every target needs at least one known marker position")
+        points = arr
+        kind = "markers"
+    n_batch = points.shape[0] if batched else None
+    if rotation is not None:
+        rot = _array("rotation", rotation)
+        want = (3, 3) if not batched else (n_batch, 3, 3)
+        if rot.shape == (3, 3) and batched:
+            rot = np.broadcast_to(rot, want)
+        if rot.shape != want:
+            raise ValueError(f"rotation must have shape {want}, got {rot.shape}")
+        _finite("rotation", rot)
+        eye = np.broadcast_to(np.eye(3), rot.shape)
+        if not np.allclose(np.swapaxes(rot, -1, -2) @ rot, eye, atol=1e-6) or np.any(
+            np.linalg.det(rot) < 0
+        ):
+            raise ValueError("rotation must be a rotation matrix (orthonormal, det +1)")
+    else:
+        rot = np.broadcast_to(np.eye(3), (n_batch, 3, 3) if batched else (3, 3))
+    weight = float(orientation_weight)
+    if not (np.isfinite(weight) and weight > 0):
+        raise ValueError(f"orientation_weight must be > 0 (m per rad), got {orientation_weight}")
+    mask = (~np.isnan(points)).astype(float)
+    m = len(sites)
+
+    def per_batch(x):
+        return np.broadcast_to(x, ((n_batch,) if batched else ()) + np.shape(x))
+
+    return _Target(
+        kind=kind,
+        segments=tuple(x[0] for x in sites),
+        s=jnp.asarray(per_batch(np.asarray([x[1] for x in sites]))),
+        offsets=jnp.asarray(per_batch(np.asarray([x[2] for x in sites]).reshape(m, 3))),
+        points=jnp.asarray(np.nan_to_num(points)),
+        mask=jnp.asarray(mask),
+        rotation=jnp.asarray(rot),
+        orientation_weight=jnp.asarray(per_batch(np.asarray(weight))),
+    )
+
+
+def default_command_range(scene: Scene, max_contraction: float = 0.5) -> tuple[np.ndarray, ...]:
+    """Default ``(lower, upper)`` commands: a length-mode tendon from 0 (its rest length) to
+    ``max_contraction`` times the length it spans (the segments from its entry ring to its
+    anchor); ``nan`` for tension-mode tendons (no natural range: give ``upper``)."""
+    lengths = np.asarray(scene.robot.stacked("length"), float)
+    lower = np.zeros(scene.n_tendons)
+    upper = np.full(scene.n_tendons, np.nan)
+    for i, t in enumerate(scene.tendons):
+        if t.mode == "length":
+            start = t.segment if t.bowden else 0
+            span = lengths[start : t.segment].sum() + t.s * lengths[t.segment]
+            upper[i] = max_contraction * span
+    return lower, upper
+
+
+def _per_tendon(name, value, n):
+    arr = _array(name, value)
+    if arr.shape not in ((), (n,)):
+        raise ValueError(
+            f"{name} must be a number or have shape ({n},) (one per tendon), got {arr.shape}"
+        )
+    return np.broadcast_to(arr, (n,)).copy()
+
+
+def _make_limits(
+    scene,
+    lower,
+    upper,
+    max_tension,
+    max_contraction,
+    tension_weight,
+    tension_limit_weight,
+    contraction_weight,
+):
+    n = scene.n_tendons
+    if n == 0:
+        raise ValueError("the scene has no tendons: there is nothing to command")
+    mc = float(max_contraction) if max_contraction is not None else None
+    if mc is not None and not 0.0 < mc < 1.0:
+        raise ValueError(
+            f"max_contraction must lie in (0, 1) (fraction of L), got {max_contraction}"
+        )
+    d_lower, d_upper = default_command_range(scene, mc if mc is not None else 0.5)
+    tmax = None
+    if max_tension is not None:
+        tmax = _finite("max_tension", _per_tendon("max_tension", max_tension, n))
+        if np.any(tmax <= 0):
+            raise ValueError(f"max_tension must be > 0 (N), got {tmax}")
+        tension_mode = np.array([t.mode == "tension" for t in scene.tendons])
+        d_upper = np.where(tension_mode, tmax, d_upper)
+    lo = d_lower if lower is None else _per_tendon("lower", lower, n)
+    hi = d_upper if upper is None else _per_tendon("upper", upper, n)
+    for i, t in enumerate(scene.tendons):
+        if t.mode == "tension" and not np.isfinite(hi[i]):
+            raise ValueError(
+                f"upper[{i}] is needed: tendon {i} is in tension mode (give upper= or max_tension=)"
+            )
+        if t.mode == "tension" and lo[i] < 0:
+            raise ValueError(f"lower[{i}] is a tension and must be >= 0 (tendons never push)")
+    _finite("lower", lo)
+    _finite("upper", hi)
+    if np.any(hi <= lo):
+        bad = int(np.flatnonzero(hi <= lo)[0])
+        raise ValueError(f"upper[{bad}] = {hi[bad]} must be above lower[{bad}] = {lo[bad]}")
+    weights = {
+        "tension_weight": tension_weight,
+        "tension_limit_weight": tension_limit_weight,
+        "contraction_weight": contraction_weight,
+    }
+    for name, w in weights.items():
+        if not (np.isfinite(w) and w >= 0):
+            raise ValueError(f"{name} must be a finite number >= 0, got {w}")
+    contraction = None
+    if mc is not None:
+        contraction = jnp.asarray(mc * np.asarray(scene.robot.stacked("length"), float))
+    return _Limits(
+        lower=jnp.asarray(lo),
+        upper=jnp.asarray(hi),
+        tension_weight=jnp.asarray(float(tension_weight)),
+        max_tension=None if tmax is None else jnp.asarray(tmax),
+        tension_limit_weight=jnp.asarray(float(tension_limit_weight)),
+        max_contraction=contraction,
+        contraction_weight=jnp.asarray(float(contraction_weight)),
+    )
+
+
+class _Settings(eqx.Module):
+    """Everything of a call but the target, checked once."""
+
+    limits: _Limits
+    reached_tol: float = eqx.field(static=True)
+    orientation_tol: float = eqx.field(static=True)
+    n_starts: int = eqx.field(static=True)
+    max_steps: int = eqx.field(static=True)
+    rtol: float = eqx.field(static=True)
+    atol: float = eqx.field(static=True)
+    seed: int = eqx.field(static=True)
+    options: tuple = eqx.field(static=True)
+
+
+def _settings(scene, kw) -> _Settings:
+    reached_tol = float(kw.pop("reached_tol"))
+    if not (np.isfinite(reached_tol) and reached_tol > 0):
+        raise ValueError(f"reached_tol must be > 0 (m), got {reached_tol}")
+    orientation_tol = float(kw.pop("orientation_tol"))
+    if not (np.isfinite(orientation_tol) and orientation_tol > 0):
+        raise ValueError(f"orientation_tol must be > 0 (rad), got {orientation_tol}")
+    n_starts, max_steps = int(kw.pop("n_starts")), int(kw.pop("max_steps"))
+    if n_starts < 1:
+        raise ValueError(f"n_starts must be >= 1, got {n_starts}")
+    if max_steps < 1:
+        raise ValueError(f"max_steps must be >= 1, got {max_steps}")
+    options = kw.pop("solver_options") or {}
+    if not isinstance(options, Mapping):
+        raise TypeError("solver_options must be a dict of pacjax.SolverOptions fields")
+    limits = _make_limits(
+        scene,
+        kw.pop("lower"),
+        kw.pop("upper"),
+        kw.pop("max_tension"),
+        kw.pop("max_contraction"),
+        kw.pop("tension_weight"),
+        kw.pop("tension_limit_weight"),
+        kw.pop("contraction_weight"),
+    )
+    return _Settings(
+        limits=limits,
+        reached_tol=reached_tol,
+        orientation_tol=orientation_tol,
+        n_starts=n_starts,
+        max_steps=max_steps,
+        rtol=float(kw.pop("rtol")),
+        atol=float(kw.pop("atol")),
+        seed=int(kw.pop("seed")),
+        options=tuple(sorted(options.items())),
+    )
+
+
+_DEFAULTS = dict(
+    lower=None,
+    upper=None,
+    max_tension=None,
+    max_contraction=0.5,
+    tension_weight=1e-5,
+    tension_limit_weight=1e-2,
+    contraction_weight=10.0,
+    reached_tol=1e-4,
+    orientation_tol=1e-2,
+    n_starts=4,
+    max_steps=60,
+    rtol=1e-4,
+    atol=1e-12,
+    seed=0,
+    solver_options=None,
+)
+
+
+#: A solution whose error is above this fraction of ``reached_tol`` is polished: solved again
+#: from where it stopped without the low-tension term, which otherwise biases it (by
+#: ``~tension_weight^2``). Gauss-Newton steps are minimum-norm, so the polish barely moves
+#: along the commands that do not change the pose and keeps the low tension found.
+_POLISH = 0.1
+
+
+def _without_tension_weight(limits: _Limits) -> _Limits:
+    return eqx.tree_at(lambda x: x.tension_weight, limits, jnp.zeros_like(limits.tension_weight))
+
+
+def _random_starts(settings: _Settings, n: int, key_offset: int = 0) -> np.ndarray:
+    lo, hi = np.asarray(settings.limits.lower), np.asarray(settings.limits.upper)
+    rng = np.random.default_rng([settings.seed, key_offset])
+    # Away from the bounds, where the sigmoid is not flat and tendons are neither slack nor
+    # fully pulled.
+    return lo + (hi - lo) * rng.uniform(0.05, 0.6, (n, lo.size))
+
+
+def _check_start(scene, name, value, shape):
+    arr = _finite(name, _array(name, value))
+    if arr.shape != shape:
+        raise ValueError(f"{name} must have shape {shape}, got {arr.shape}")
+    return arr
+
+
+def _is_reached(settings, error, angle, ok):
+    return (error <= settings.reached_tol) & (angle <= settings.orientation_tol) & ok
+
+
+def _result(scene, settings, u, q, error, angle, tip, rot, ok, iterations, starts):
+    reached = _is_reached(settings, np.asarray(error), np.asarray(angle), np.asarray(ok))
+    code = np.where(reached, REACHED, np.where(np.asarray(ok), NOT_REACHED, NO_EQUILIBRIUM))
+    tensions = (
+        _tensions(scene, q, u)
+        if np.ndim(u) == 1
+        else jax.vmap(lambda a, b: _tensions(scene, a, b))(q, u)
+    )
+    return InverseResult(
+        controls=jnp.asarray(u),
+        q=jnp.asarray(q),
+        error=jnp.asarray(error),
+        orientation_error=jnp.asarray(angle),
+        reached=jnp.asarray(reached),
+        position=jnp.asarray(tip),
+        rotation=jnp.asarray(rot),
+        tensions=jnp.asarray(tensions),
+        iterations=jnp.asarray(iterations),
+        starts=jnp.asarray(starts),
+        converged=jnp.asarray(ok),
+        code=jnp.asarray(code),
+    )
+
+
+def _cost(settings, error, angle, weight):
+    """Ranks candidate solutions: position error plus weighted orientation error (m)."""
+    return np.asarray(error) + np.asarray(weight) * np.asarray(angle)
+
+
+# ------------------------------------------------------------------------------ public API
+def inverse_statics(
+    scene: Scene,
+    target,
+    *,
+    rotation=None,
+    orientation_weight: float = 0.1,
+    sites=None,
+    controls0=None,
+    q0=None,
+    workspace: Workspace | None = None,
+    **kwargs,
+) -> InverseResult:
+    """Tendon commands whose equilibrium (under the scene's loads) reaches ``target``.
+
+    Args:
+        scene: the :class:`Scene` (its loads, e.g. a payload, change the answer).
+        target: tip position (3,) in m; with ``sites``, the positions (m, 3) of those marker
+            sites (NaN: ignored coordinate).
+        rotation: (3, 3) target tip orientation (world frame): a pose target.
+        orientation_weight: metres of position error worth one radian of orientation error.
+        sites: marker sites ``((segment, s), ...)`` or ``((segment, s, offset_xyz), ...)``.
+        controls0: first start (default: the nearest ``workspace`` sample, else a random
+            command drawn from ``seed``).
+        q0: equilibrium (or a nearby configuration) at ``controls0``; default: solved.
+        workspace: a :class:`Workspace` whose nearest samples give the starts.
+        lower, upper: command bounds (n_tendons,) or scalars; default
+            :func:`default_command_range`.
+        max_tension: tension limit (N), scalar or per tendon (None: none).
+        max_contraction: segment contraction limit as a fraction of ``L`` (default 0.5: the
+            paper's robot contracts 0-70 mm of 135.4 mm); also sets the default ``upper``.
+        tension_weight: low-tension preference (m/N), default 1e-5.
+        tension_limit_weight, contraction_weight: weights of the limit hinges (m/N, m/m).
+        reached_tol: position error (m) below which the target counts as reached (1e-4).
+        orientation_tol: orientation error (rad) for a pose target to count as reached (0.01).
+        n_starts: starts tried, in order, until one reaches the target (default 4).
+        max_steps: Levenberg-Marquardt iterations per start (default 60).
+        rtol, atol: Levenberg-Marquardt stopping tolerances on ``z`` and the residual.
+        seed: seed of the random starts.
+        solver_options: :class:`pacjax.SolverOptions` fields for the equilibrium solves.
+
+    Returns:
+        An :class:`InverseResult`; ``reached`` is False (and the closest pose found is
+        returned) when no start reached the target.
+    """
+    if not isinstance(scene, Scene):
+        raise TypeError(f"scene must be a pacjax.Scene, got {type(scene).__name__}")
+    settings = _settings(scene, _kwargs(kwargs))
+    tgt = _make_target(scene, target, rotation, orientation_weight, sites)
+    starts = []
+    if controls0 is not None:
+        u = _check_start(scene, "controls0", controls0, (scene.n_tendons,))
+        q = None if q0 is None else _check_start(scene, "q0", q0, (scene.n_dofs,))
+        starts.append((u, q))
+    elif q0 is not None:
+        raise ValueError("q0 needs controls0 (the commands it is the equilibrium of)")
+    if workspace is not None:
+        ref = np.nanmean(np.where(np.asarray(tgt.mask) > 0, np.asarray(tgt.points), np.nan), 0)
+        for i in workspace.nearest(ref, settings.n_starts):
+            starts.append((np.asarray(workspace.controls[i]), np.asarray(workspace.q[i])))
+    starts += [(u, None) for u in _random_starts(settings, settings.n_starts)]
+    starts = starts[: settings.n_starts]
+
+    best, iterations = None, 0
+    k = 0
+    for k, (u, q) in enumerate(starts, start=1):  # noqa: B007  (k: starts used)
+        if q is None:
+            q = solve_equilibrium(scene, u, **dict(settings.options)).q
+        out = _solve_one(
+            scene,
+            tgt,
+            settings.limits,
+            jnp.asarray(u),
+            jnp.asarray(q),
+            jnp.asarray(settings.rtol),
+            jnp.asarray(settings.atol),
+            settings.max_steps,
+            settings.options,
+        )
+        iterations += int(out[-1])
+        if bool(out[6]) and float(out[2]) > _POLISH * settings.reached_tol:
+            polished = _solve_one(
+                scene,
+                tgt,
+                _without_tension_weight(settings.limits),
+                out[0],
+                out[1],
+                jnp.asarray(settings.rtol),
+                jnp.asarray(settings.atol),
+                settings.max_steps,
+                settings.options,
+            )
+            iterations += int(polished[-1])
+            if bool(polished[6]) and float(polished[2]) < float(out[2]):
+                out = polished
+        cost = float(_cost(settings, out[2], out[3], tgt.orientation_weight))
+        if best is None or cost < best[0]:
+            best = (cost, out)
+        if _is_reached(settings, float(out[2]), float(out[3]), bool(out[6])):
+            break
+    u, q, error, angle, tip, rot, ok, _ = best[1]
+    return _result(scene, settings, u, q, error, angle, tip, rot, ok, iterations, k)
+
+
+def _kwargs(kwargs):
+    unknown = set(kwargs) - set(_DEFAULTS)
+    if unknown:
+        raise TypeError(f"unknown option(s): {', '.join(sorted(unknown))}")
+    return {**_DEFAULTS, **kwargs}
+
+
+def _pad_rows(x, size):
+    return np.concatenate([x, np.repeat(x[-1:], size - x.shape[0], axis=0)])
+
+
+def inverse_statics_batch(
+    scene: Scene,
+    targets,
+    *,
+    rotation=None,
+    orientation_weight: float = 0.1,
+    sites=None,
+    controls0=None,
+    workspace: Workspace | None = None,
+    chunk_size: int = 256,
+    **kwargs,
+) -> InverseResult:
+    """:func:`inverse_statics` for many targets at once (``vmap``-ed, in chunks).
+
+    ``targets`` is (n, 3) tip positions or, with ``sites``, (n, m, 3) marker positions;
+    ``rotation`` (3, 3) or (n, 3, 3). Every target first starts from ``controls0`` (n_tendons,)
+    or (n, n_tendons), else the nearest ``workspace`` sample, else a random command; the targets
+    not reached then try further random starts together, up to ``n_starts``. Other options as
+    :func:`inverse_statics`. Returns an :class:`InverseResult` with a leading batch axis.
+    """
+    if not isinstance(scene, Scene):
+        raise TypeError(f"scene must be a pacjax.Scene, got {type(scene).__name__}")
+    settings = _settings(scene, _kwargs(kwargs))
+    tgt = _make_target(scene, targets, rotation, orientation_weight, sites, batched=True)
+    n = tgt.points.shape[0]
+    if chunk_size < 1:
+        raise ValueError(f"chunk_size must be >= 1, got {chunk_size}")
+    chunk = min(chunk_size, n)
+    nt = scene.n_tendons
+    q_start = None
+    if controls0 is not None:
+        u_start = np.broadcast_to(_finite("controls0", _array("controls0", controls0)), (n, nt))
+    elif workspace is not None:
+        ref = np.nanmean(np.where(np.asarray(tgt.mask) > 0, np.asarray(tgt.points), np.nan), 1)
+        idx = workspace.nearest(ref, 1)[:, 0]
+        u_start, q_start = np.asarray(workspace.controls)[idx], np.asarray(workspace.q)[idx]
+    else:
+        u_start = _random_starts(settings, n)
+    if q_start is None:
+        q_start = np.asarray(solve_batch(scene, u_start, chunk_size=chunk, progress=False).q)
+
+    u_best = np.zeros((n, nt))
+    fields = None
+    cost = np.full(n, np.inf)
+    iterations = np.zeros(n, int)
+    starts = np.zeros(n, int)
+    todo = np.arange(n)
+    for k in range(settings.n_starts):
+        if k > 0:
+            u_start = _random_starts(settings, n, key_offset=k)
+            q_start = np.asarray(
+                solve_batch(scene, u_start[todo], chunk_size=chunk, progress=False).q
+            )
+            q_full = np.zeros((n, scene.n_dofs))
+            q_full[todo] = q_start
+            q_start = q_full
+        for begin in range(0, todo.size, chunk):
+            rows = todo[begin : begin + chunk]
+            pad = np.concatenate([rows, np.repeat(rows[-1:], chunk - rows.size)])
+            out = _solve_many(
+                scene,
+                jtu.tree_map(lambda x, p=pad: x[p], tgt),
+                settings.limits,
+                jnp.asarray(u_start[pad]),
+                jnp.asarray(q_start[pad]),
+                jnp.asarray(settings.rtol),
+                jnp.asarray(settings.atol),
+                settings.max_steps,
+                settings.options,
+            )
+            out = [np.array(x)[: rows.size] for x in out]
+            polish = out[6] & (out[2] > _POLISH * settings.reached_tol)
+            if np.any(polish):
+                again = _solve_many(
+                    scene,
+                    jtu.tree_map(lambda x, p=pad: x[p], tgt),
+                    _without_tension_weight(settings.limits),
+                    jnp.asarray(_pad_rows(out[0], chunk)),
+                    jnp.asarray(_pad_rows(out[1], chunk)),
+                    jnp.asarray(settings.rtol),
+                    jnp.asarray(settings.atol),
+                    settings.max_steps,
+                    settings.options,
+                )
+                again = [np.asarray(x)[: rows.size] for x in again]
+                take = polish & again[6] & (again[2] < out[2])
+                for f, x in zip(out[:7], again[:7], strict=True):
+                    f[take] = x[take]
+                out[7] = out[7] + np.where(polish, again[7], 0)
+            if fields is None:
+                fields = [np.zeros((n,) + x.shape[1:], x.dtype) for x in out[:7]]
+            c = _cost(settings, out[2], out[3], np.asarray(tgt.orientation_weight)[rows])
+            better = c < cost[rows]
+            for f, x in zip(fields, out[:7], strict=True):
+                f[rows[better]] = x[better]
+            cost[rows[better]] = c[better]
+            iterations[rows] += out[7]
+            starts[rows] += 1
+        reached = _is_reached(settings, fields[2], fields[3], fields[6])
+        todo = np.flatnonzero(~reached)
+        if todo.size == 0:
+            break
+    u_best, q, error, angle, tip, rot, ok = fields
+    return _result(scene, settings, u_best, q, error, angle, tip, rot, ok, iterations, starts)
+
+
+def track(
+    scene: Scene,
+    waypoints,
+    *,
+    rotation=None,
+    orientation_weight: float = 0.1,
+    sites=None,
+    controls0=None,
+    q0=None,
+    workspace: Workspace | None = None,
+    **kwargs,
+) -> Tracking:
+    """Commands along a path of targets, each waypoint warm-started from the previous one.
+
+    ``waypoints`` is (n, 3) tip positions or, with ``sites``, (n, m, 3) marker positions
+    (``rotation`` (n, 3, 3) for poses). The first waypoint is solved like
+    :func:`inverse_statics` (from ``controls0``/``q0``, or ``workspace``, or random starts);
+    every later one starts from the previous commands and equilibrium, and falls back to the
+    other starts only if that fails. Neighbouring waypoints close together give small
+    Levenberg-Marquardt steps, so the commands vary smoothly (:attr:`Tracking.max_command_jump`).
+    """
+    if not isinstance(scene, Scene):
+        raise TypeError(f"scene must be a pacjax.Scene, got {type(scene).__name__}")
+    kw = _kwargs(kwargs)
+    _settings(scene, dict(kw))  # check the options before the first solve
+    tgt = _make_target(scene, waypoints, rotation, orientation_weight, sites, batched=True)
+    n = tgt.points.shape[0]
+    start = time.perf_counter()
+    results = []
+    u, q = controls0, q0
+    for i in range(n):
+        one = jtu.tree_map(lambda x, i=i: x[i], tgt)
+        point = np.asarray(waypoints, float)[i]
+        rot_i = None if rotation is None else np.asarray(one.rotation)
+        res = inverse_statics(
+            scene,
+            point,
+            rotation=rot_i,
+            orientation_weight=orientation_weight,
+            sites=sites,
+            controls0=u,
+            q0=q,
+            workspace=workspace if i == 0 else None,
+            **kw,
+        )
+        results.append(res)
+        u, q = np.asarray(res.controls), np.asarray(res.q)
+    jax.block_until_ready(results[-1])
+    seconds = time.perf_counter() - start
+    stacked = jtu.tree_map(lambda *xs: jnp.stack(xs), *results)
+    u_all = np.asarray(stacked.controls)
+    jump = float(np.max(np.abs(np.diff(u_all, axis=0)))) if n > 1 else 0.0
+    return Tracking(
+        result=stacked, max_command_jump=jump, seconds=seconds, waypoints_per_second=n / seconds
+    )
+
+
+def sample_workspace(
+    scene: Scene, n: int = 256, *, seed: int = 0, chunk_size: int = 256, **kwargs
+) -> Workspace:
+    """Forward-solve ``n`` random commands within the bounds (``lower``, ``upper``,
+    ``max_contraction`` as :func:`inverse_statics`): the reachable set, and starts for inverse
+    solves."""
+    if not isinstance(scene, Scene):
+        raise TypeError(f"scene must be a pacjax.Scene, got {type(scene).__name__}")
+    if int(n) < 1:
+        raise ValueError(f"n must be >= 1, got {n}")
+    settings = _settings(scene, _kwargs({**kwargs, "seed": seed}))
+    lo, hi = np.asarray(settings.limits.lower), np.asarray(settings.limits.upper)
+    rng = np.random.default_rng(seed)
+    u = lo + (hi - lo) * rng.uniform(0.0, 1.0, (int(n), lo.size))
+    eq = solve_batch(scene, u, chunk_size=chunk_size, progress=False, **dict(settings.options))
+    tip = _tip_batch(scene, eq.q)
+    return Workspace(controls=jnp.asarray(u), q=eq.q, tip=tip, converged=eq.converged & eq.stable)
+
+
+@eqx.filter_jit
+def _tip_batch(scene, q):
+    n = scene.n_segments - 1
+    return jax.vmap(lambda x: scene.frames(x, np.asarray([n]), jnp.ones(1, x.dtype))[1][0])(q)
