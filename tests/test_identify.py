@@ -263,3 +263,29 @@ def test_high_fidelity_scene_structure():
     bowden = pj.presets.stella2023(n_sections=2)
     with pytest.raises(ValueError, match="Bowden"):
         pj.high_fidelity(bowden, subdivisions=2)
+
+
+@pytest.mark.slow
+def test_orientations_and_marker_offsets_are_recovered():
+    """Orientation residuals and marker stand-offs (a second compilation: slow)."""
+    truth = make_scene()
+    sites = [(0, 0.5), (0, 1.0, (0.0, 0.012, 0.004))]
+    u, mass = commands(N_FRAMES, 4)
+    data, _ = pj.synthetic_mocap(
+        truth,
+        u,
+        sites=sites,
+        payload_mass=mass,
+        exact=True,
+        noise=0.0,
+        transform=None,
+        orientations=True,
+        orientation_noise=0.0,
+    )
+    fitted, report = pj.identify(
+        make_scene(2 * TRUE_EI), data, ("bending_stiffness", "marker_offsets"), progress=False
+    )
+    assert report.parameters["bending_stiffness"]["value"][0] == pytest.approx(TRUE_EI, rel=1e-5)
+    np.testing.assert_allclose(fitted.markers[1][2], sites[1][2], atol=1e-6)
+    np.testing.assert_allclose(fitted.markers[0][2], 0.0, atol=1e-6)
+    assert np.nanmax(report.train.orientation_error_deg) < 1e-3
