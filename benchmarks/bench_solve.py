@@ -6,30 +6,21 @@ For each strain model: compile time (first call minus a warm call), warm single-
 steps, and equilibria per second for a batch of random commands (0-20 mm pull-ins, 200 g
 payload), with the fraction converged and stable. Ratios are against PCC measured in the same
 run. Timings are wall-clock on this machine; nothing here is asserted.
+
+``pacjax bench`` (:mod:`pacjax.bench`) extends this: float32, several batch sizes, the plain-flow
+baseline and the gradient cost, to JSON and Markdown. The models and the timer are shared.
 """
 
 import argparse
 import json
 import platform
-import time
 
 import jax
 import numpy as np
 
 import pacjax as pj
-
-MODELS = {
-    "PCC": pj.PCC,
-    "PAC": pj.PAC,
-    "Poly3": lambda: pj.PolynomialCurvature(3),
-}
-
-
-def _time(fn):
-    t = time.perf_counter()
-    out = fn()
-    jax.block_until_ready(out)
-    return time.perf_counter() - t, out
+from pacjax.bench import MODELS
+from pacjax.bench import timed as _time
 
 
 def run(batch: int, repeats: int, seed: int = 0) -> dict:

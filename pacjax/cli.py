@@ -9,6 +9,11 @@
   each ``x,y,z`` row (m) of the CSV (a path, warm-started row to row, or ``--independent``);
   writes ``<name>_commands.csv`` and ``<name>_inverse.png``; exit status 3 when a target was
   not reached.
+- ``pacjax batch SCENE.toml --n N [--sampler lhs|uniform|grid] [--out DIR]``: samples N commands,
+  solves them chunk by chunk and writes ``<name>_batch.h5``, ``<name>_batch.json`` and
+  ``<name>_workspace.png`` (see :mod:`pacjax.batchrun`).
+- ``pacjax bench [--batch 1,100] [--models PAC] [--dtypes float64,float32] [--json F] [--md F]``:
+  equilibria per second of the paper's robot (see :mod:`pacjax.bench`).
 
 Compiling a solver dominates a first run (tens of seconds); JAX's persistent compilation cache
 (``~/.cache/pacjax-jax``, or ``$PACJAX_CACHE_DIR``; ``PACJAX_CACHE_DIR=off`` disables it) keeps
@@ -551,6 +556,237 @@ def inverse(
         click.echo(f"wrote {png_path}")
     if not reached.all():
         sys.exit(3)
+
+
+# ------------------------------------------------------------------------------ batch
+def _per_tendon(text: str | None, option: str):
+    """``--low``/``--high``: one number, or comma-separated numbers (one per tendon)."""
+    if text is None:
+        return None
+    try:
+        values = [float(v) for v in text.replace(" ", "").split(",") if v != ""]
+    except ValueError:
+        raise click.ClickException(
+            f"{option} must be comma-separated numbers, got {text!r}"
+        ) from None
+    if not values:
+        raise click.ClickException(f"{option} is empty")
+    return values[0] if len(values) == 1 else values
+
+
+@cli.command()
+@click.argument("scene_file", type=click.Path(exists=True, dir_okay=False))
+@click.option("--n", "n", required=True, type=click.IntRange(min=1), help="Number of commands.")
+@click.option(
+    "--sampler",
+    type=click.Choice(["uniform", "lhs", "grid"]),
+    default="lhs",
+    show_default=True,
+    help="Uniform random, Latin hypercube, or the full grid with at most N rows.",
+)
+@click.option("--seed", default=0, show_default=True, type=int, help="Sampling seed.")
+@click.option("--low", help="Lowest command: one number or one per tendon (default: 0).")
+@click.option(
+    "--high",
+    help="Highest command: one number or one per tendon (default: from the tendons, see "
+    "pacjax.batchrun.default_ranges).",
+)
+@click.option(
+    "--chunk-size",
+    default=1024,
+    show_default=True,
+    type=click.IntRange(min=1),
+    help="Rows per compiled call and per write (memory is bounded by it).",
+)
+@click.option("--tol", type=click.FloatRange(min=0, min_open=True), help="Solver tolerance.")
+@click.option(
+    "--float32",
+    "use_float32",
+    is_flag=True,
+    help="Solve in float32 (tolerance 1e-4 unless --tol or the file's [solver] sets one).",
+)
+@click.option(
+    "--out",
+    default=".",
+    show_default=True,
+    type=click.Path(file_okay=False),
+    help="Directory for <name>_batch.h5, <name>_batch.json and <name>_workspace.png.",
+)
+@click.option("--no-plot", is_flag=True, help="Skip the workspace figure.")
+def batch(scene_file, n, sampler, seed, low, high, chunk_size, tol, use_float32, out, no_plot):
+    """Sample N tendon commands of a TOML scene, solve them chunk by chunk and write the
+    equilibria (commands, q, markers, tip pose, converged, stable, residual, steps) to an HDF5
+    file as they are solved, with a workspace plot and a JSON summary."""
+    import jax.numpy as jnp
+
+    from . import batchrun
+    from .scenefile import load_scene
+
+    # Everything is checked before anything is compiled.
+    try:
+        scene, _, extra = load_scene(scene_file)
+        default_low, default_high = batchrun.default_ranges(scene)
+        lo, hi = batchrun.check_ranges(
+            default_low if low is None else _per_tendon(low, "--low"),
+            default_high if high is None else _per_tendon(high, "--high"),
+            scene.n_tendons,
+        )
+        commands = batchrun.sample_commands(sampler, n, lo, hi, seed)
+        options = dict(extra["solver"])
+        if tol is not None:
+            options["tol"] = tol
+        elif use_float32 and "tol" not in options:
+            options["tol"] = 1e-4
+        pj.SolverOptions(**{k: v for k, v in options.items() if k != "fallback"})
+    except (ValueError, TypeError, OSError) as err:
+        raise click.ClickException(f"{scene_file}: {err}") from None
+    if use_float32:
+        scene = pj.astype(scene, jnp.float32)
+    out = _output_dir(out)
+    name = extra["name"]
+    paths = {
+        "h5": os.path.join(out, f"{name}_batch.h5"),
+        "json": os.path.join(out, f"{name}_batch.json"),
+    }
+    with open(scene_file, encoding="utf-8") as f:
+        scene_text = f.read()
+    attrs = {
+        "scene_toml": scene_text,
+        "sampler": sampler,
+        "seed": seed,
+        "low": lo,
+        "high": hi,
+        "dtype": "float32" if use_float32 else "float64",
+        "tol": float(options.get("tol", pj.SolverOptions().tol)),
+    }
+    if len(commands) != n:
+        click.echo(
+            f"grid: {round(len(commands) ** (1 / scene.n_tendons))} values per tendon, "
+            f"{len(commands)} rows"
+        )
+    bar = _progress(len(commands), "batch")
+    with bar:
+        bar.unit = "eq"
+        summary = batchrun.run_batch(
+            scene,
+            commands,
+            paths["h5"],
+            chunk_size=chunk_size,
+            attrs=attrs,
+            on_chunk=bar.update,
+            **options,
+        )
+    report = {
+        "scene": os.path.abspath(scene_file),
+        "name": name,
+        "model": type(scene.model).__name__,
+        **{k: v for k, v in attrs.items() if k != "scene_toml"},
+        "low": lo.tolist(),
+        "high": hi.tolist(),
+        **summary.as_dict(),
+        "file": os.path.abspath(paths["h5"]),
+    }
+    with open(paths["json"], "w", encoding="utf-8") as f:
+        json.dump(report, f, indent=2)
+        f.write("\n")
+    click.echo(f"{name} ({report['model']}, {report['dtype']}, {sampler} sampling):")
+    for line in summary.lines():
+        click.echo("  " + line)
+    if not no_plot:
+        paths["png"] = batchrun.plot_workspace(
+            paths["h5"], os.path.join(out, f"{name}_workspace.png"), title=name
+        )
+    for path in paths.values():
+        click.echo(f"wrote {path}")
+
+
+# ------------------------------------------------------------------------------ bench
+@cli.command()
+@click.option("--batch", "batches", default="1,100", show_default=True, help="Batch sizes.")
+@click.option("--models", default="PAC", show_default=True, help="Strain models: PCC, PAC, Poly3.")
+@click.option("--dtypes", default="float64,float32", show_default=True, help="float64, float32.")
+@click.option(
+    "--baseline-batch",
+    default=8,
+    show_default=True,
+    type=click.IntRange(min=0),
+    help="Batch of the plain damped-flow baseline (diffrax Kvaerno5; 0: skip).",
+)
+@click.option("--baseline-models", default="PAC", show_default=True, help="Models of the baseline.")
+@click.option(
+    "--grad-batch",
+    default=16,
+    show_default=True,
+    type=click.IntRange(min=0),
+    help="Batch of the gradient-cost measurement (0: skip).",
+)
+@click.option(
+    "--scene",
+    "scene_file",
+    type=click.Path(exists=True, dir_okay=False),
+    help="Benchmark this TOML scene instead of the paper's robot (--models is then ignored).",
+)
+@click.option("--seed", default=0, show_default=True, type=int, help="Commands' seed.")
+@click.option("--json", "json_path", type=click.Path(dir_okay=False), help="Write the record.")
+@click.option("--md", "md_path", type=click.Path(dir_okay=False), help="Write the tables.")
+def bench(
+    batches,
+    models,
+    dtypes,
+    baseline_batch,
+    baseline_models,
+    grad_batch,
+    scene_file,
+    seed,
+    json_path,
+    md_path,
+):
+    """Equilibria per second of the paper's robot per model x batch size x dtype, compile time
+    apart, against the plain damped flow, and the cost of a gradient through a batch."""
+    from . import bench as benchmod
+
+    try:
+        batch_sizes = benchmod.parse_list(batches, int)
+    except ValueError:
+        raise click.ClickException(
+            f"--batch must be comma-separated integers, got {batches!r}"
+        ) from None
+    scene = label = None
+    if scene_file is not None:
+        from .scenefile import load_scene
+
+        try:
+            scene, _, extra = load_scene(scene_file)
+        except (ValueError, OSError) as err:
+            raise click.ClickException(str(err)) from None
+        label = extra["name"]
+    options = dict(
+        batches=batch_sizes,
+        models=benchmod.parse_list(models),
+        dtypes=benchmod.parse_list(dtypes),
+        baseline_models=benchmod.parse_list(baseline_models),
+        baseline_batch=baseline_batch,
+        grad_batch=grad_batch,
+        seed=seed,
+        scene=scene,
+        scene_label=label,
+        log=lambda text: click.echo(text, err=True),
+    )
+    try:
+        record = benchmod.run(**options)
+    except (ValueError, TypeError) as err:
+        raise click.ClickException(str(err)) from None
+    text = benchmod.to_markdown(record)
+    click.echo(text)
+    if json_path:
+        with open(json_path, "w", encoding="utf-8") as f:
+            json.dump(record, f, indent=2)
+            f.write("\n")
+        click.echo(f"wrote {json_path}")
+    if md_path:
+        with open(md_path, "w", encoding="utf-8") as f:
+            f.write(text)
+        click.echo(f"wrote {md_path}")
 
 
 if __name__ == "__main__":

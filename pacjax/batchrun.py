@@ -1,0 +1,423 @@
+"""Many equilibria of one scene: sample commands, solve them chunk by chunk, write a columnar file.
+
+The engine of ``pacjax batch``; every step is a plain function so that scripts can use them too:
+
+- :func:`default_ranges`: command ranges from a scene's tendons;
+- :func:`sample_commands`: uniform, Latin-hypercube (``scipy.stats.qmc``) or grid samples;
+- :func:`run_batch`: solves with :func:`pacjax.iter_batch` and writes every chunk to an HDF5
+  file (:class:`BatchWriter`) as soon as it is solved, so memory is bounded by the chunk size;
+- :func:`read_batch` and :func:`plot_workspace`: read the file back, plot the tip positions.
+
+The file (HDF5, one dataset per column, row ``i`` = command ``i``):
+
+=================  ================  ==========================================================
+``commands``       (n, n_tendons)    tendon commands (m pull-in, or N tension)
+``q``              (n, n_dofs)       equilibrium coordinates (attribute ``names``)
+``markers``        (n, n_sites, 3)   marker positions (m), only for scenes with ``markers``
+``tip_position``   (n, 3)            tip position (m), world frame
+``tip_rotation``   (n, 3, 3)         tip rotation matrix, tip frame to world frame
+``converged``      (n,)              bool
+``stable``         (n,)              bool (False at a saddle)
+``residual_norm``  (n,)              scaled residual (see :class:`pacjax.Equilibrium`)
+``steps``          (n,)              solver steps
+``result``         (n,)              solver result code (0 converged; ``Equilibrium.reason``)
+=================  ================  ==========================================================
+
+File attributes: ``scene_toml`` (the scene file's text, when given), ``sampler``, ``seed``,
+``low``, ``high``, ``dtype``, ``tol``, ``pacjax_version``, and ``rows_written`` (rows complete
+so far; a run that was interrupted leaves a readable prefix).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import resource
+import sys
+import time
+from collections.abc import Callable
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+import pacjax as pj
+
+SAMPLERS = ("uniform", "lhs", "grid")
+
+#: Default pull-in range of a length-mode tendon, as a fraction of the rest length of the
+#: segments it spans (its own segment for a Bowden tendon, base to anchor for a free one).
+PULL_IN_FRACTION = 0.15
+#: Default tension range of a tension-mode tendon: the tension whose moment ``T r`` alone would
+#: bend its anchor segment by this angle (rad), ``T = EI angle / (L r)``.
+TENSION_BEND_ANGLE = math.pi / 2
+
+
+# ------------------------------------------------------------------------------ sampling
+def default_ranges(scene: pj.Scene) -> tuple[np.ndarray, np.ndarray]:
+    """``(low, high)`` command ranges from the scene's tendons: zero up to
+    :data:`PULL_IN_FRACTION` of the spanned length for length-mode tendons (m), zero up to the
+    tension that bends the anchor segment by :data:`TENSION_BEND_ANGLE` for tension-mode ones
+    (N)."""
+    if not isinstance(scene, pj.Scene):
+        raise TypeError(f"scene must be a pacjax.Scene, got {type(scene).__name__}")
+    if scene.n_tendons == 0:
+        raise ValueError("the scene has no tendons: there are no commands to sample")
+    lengths = [float(seg.length) for seg in scene.robot.segments]
+    high = []
+    for t in scene.tendons:
+        own = lengths[t.segment] * t.s
+        if t.mode == "length":
+            spanned = own if t.bowden else sum(lengths[: t.segment]) + own
+            high.append(PULL_IN_FRACTION * spanned)
+        else:
+            seg = scene.robot.segments[t.segment]
+            high.append(
+                float(seg.bending_stiffness)
+                * TENSION_BEND_ANGLE
+                / (lengths[t.segment] * float(t.offset))
+            )
+    high = np.asarray(high)
+    return np.zeros_like(high), high
+
+
+def check_ranges(low, high, n_tendons: int) -> tuple[np.ndarray, np.ndarray]:
+    """``low`` and ``high`` as ``(n_tendons,)`` arrays (a scalar applies to every tendon);
+    raises :class:`ValueError` naming the field when a shape or value is wrong."""
+    out = []
+    for name, value in (("low", low), ("high", high)):
+        try:
+            arr = np.asarray(value, dtype=float)
+        except (TypeError, ValueError):
+            raise ValueError(f"{name} must be numbers, got {value!r}") from None
+        if arr.ndim == 0:
+            arr = np.full(n_tendons, float(arr))
+        if arr.shape != (n_tendons,):
+            raise ValueError(
+                f"{name} must be one number or one per tendon ({n_tendons} values), "
+                f"got shape {arr.shape}"
+            )
+        if not np.all(np.isfinite(arr)):
+            raise ValueError(f"{name} must be finite, got {arr.tolist()}")
+        out.append(arr)
+    low, high = out
+    bad = np.flatnonzero(low > high)
+    if bad.size:
+        i = int(bad[0])
+        raise ValueError(f"low must be <= high for every tendon; tendon {i}: {low[i]} > {high[i]}")
+    return low, high
+
+
+def grid_points_per_axis(n: int, n_tendons: int) -> int:
+    """Points per tendon of the largest full grid with at most ``n`` rows."""
+    k = int(math.floor(n ** (1.0 / n_tendons) + 1e-9))
+    while (k + 1) ** n_tendons <= n:
+        k += 1
+    while k > 1 and k**n_tendons > n:
+        k -= 1
+    return k
+
+
+def sample_commands(sampler: str, n: int, low, high, seed: int = 0) -> np.ndarray:
+    """Commands ``(rows, n_tendons)`` between ``low`` and ``high`` (arrays, one per tendon).
+
+    ``uniform``: ``n`` independent uniform rows. ``lhs``: ``n`` rows of a Latin hypercube
+    (every tendon's range cut into ``n`` equal strata, one sample in each). ``grid``: the full
+    grid with ``k = floor(n ** (1 / n_tendons))`` evenly spaced values per tendon (ends
+    included), ``k ** n_tendons <= n`` rows; needs ``k >= 2``.
+    """
+    if sampler not in SAMPLERS:
+        raise ValueError(f"sampler must be one of {', '.join(SAMPLERS)}; got {sampler!r}")
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)):
+        raise TypeError(f"n must be an integer, got {n!r}")
+    if n < 1:
+        raise ValueError(f"n must be >= 1, got {n}")
+    low = np.asarray(low, float)
+    high = np.asarray(high, float)
+    m = low.shape[0]
+    if sampler == "uniform":
+        return np.random.default_rng(seed).uniform(low, high, (n, m))
+    if sampler == "lhs":
+        from scipy.stats import qmc
+
+        try:
+            lhs = qmc.LatinHypercube(d=m, rng=np.random.default_rng(seed))
+        except TypeError:  # scipy < 1.15 names it seed
+            lhs = qmc.LatinHypercube(d=m, seed=np.random.default_rng(seed))
+        unit = lhs.random(n)
+        return low + unit * (high - low)
+    k = grid_points_per_axis(n, m)
+    if k < 2:
+        raise ValueError(
+            f"a grid over {m} tendons needs n >= 2**{m} = {2**m} (2 values per tendon), got {n}"
+        )
+    axes = [np.linspace(lo, hi, k) for lo, hi in zip(low, high, strict=True)]
+    return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, m)
+
+
+# ------------------------------------------------------------------------------ outputs
+@eqx.filter_jit
+def _pose_and_markers(scene, q):
+    def one(qi):
+        tip, rot = pj.tip_pose(scene, qi)
+        sites = pj.markers(scene, qi) if scene.markers else None
+        return tip, rot, sites
+
+    return jax.vmap(one)(q)
+
+
+def chunk_columns(scene: pj.Scene, commands: np.ndarray, eq: pj.Equilibrium) -> dict:
+    """The file's columns for one solved chunk (numpy arrays, leading axis = rows)."""
+    tip, rot, sites = _pose_and_markers(scene, jnp.asarray(eq.q))
+    columns = {
+        "commands": np.asarray(commands, float),
+        "q": np.asarray(eq.q),
+        "tip_position": np.asarray(tip),
+        "tip_rotation": np.asarray(rot),
+        "converged": np.asarray(eq.converged, bool),
+        "stable": np.asarray(eq.stable, bool),
+        "residual_norm": np.asarray(eq.residual_norm),
+        "steps": np.asarray(eq.steps, np.int32),
+        "result": np.asarray(eq.result, np.int8),
+    }
+    if sites is not None:
+        columns["markers"] = np.asarray(sites)
+    return columns
+
+
+class BatchWriter:
+    """An HDF5 file with one preallocated dataset per column, filled chunk by chunk.
+
+    Use as a context manager; :meth:`write` stores the rows of one chunk and flushes.
+    """
+
+    def __init__(
+        self, path: str, scene: pj.Scene, n: int, attrs: dict | None = None, chunk_rows: int = 1024
+    ):
+        import h5py
+
+        self.path = path
+        self.n = n
+        self.file = h5py.File(path, "w")
+        dtype = np.dtype(jnp.asarray(scene.robot.segments[0].length).dtype)
+        rows = max(1, min(chunk_rows, n))
+        shapes = {
+            "commands": ((scene.n_tendons,), np.float64),
+            "q": ((scene.n_dofs,), dtype),
+            "tip_position": ((3,), dtype),
+            "tip_rotation": ((3, 3), dtype),
+            "converged": ((), np.bool_),
+            "stable": ((), np.bool_),
+            "residual_norm": ((), dtype),
+            "steps": ((), np.int32),
+            "result": ((), np.int8),
+        }
+        if scene.markers:
+            shapes["markers"] = ((len(scene.markers), 3), dtype)
+        for name, (shape, dt) in shapes.items():
+            self.file.create_dataset(name, (n, *shape), dtype=dt, chunks=(rows, *shape))
+        self.file["q"].attrs["names"] = list(scene.coordinate_names())
+        if scene.markers:
+            self.file["markers"].attrs["sites"] = np.asarray(
+                [[seg, s, *offset] for seg, s, offset in scene.markers], float
+            )
+        for key, value in (attrs or {}).items():
+            self.file.attrs[key] = value
+        self.file.attrs["rows_written"] = 0
+        self.file.attrs["pacjax_version"] = pj.__version__
+        self.rows_written = 0
+
+    def write(self, rows: slice, columns: dict) -> None:
+        for name, values in columns.items():
+            self.file[name][rows] = values
+        self.rows_written = max(self.rows_written, rows.stop)
+        self.file.attrs["rows_written"] = self.rows_written
+        self.file.flush()
+
+    def close(self) -> None:
+        self.file.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+def read_batch(path: str, columns=None, rows: slice | None = None) -> dict:
+    """Columns of a batch file as numpy arrays (all by default; ``rows`` selects a range)."""
+    import h5py
+
+    with h5py.File(path, "r") as f:
+        names = list(f.keys()) if columns is None else list(columns)
+        sel = slice(None) if rows is None else rows
+        out = {name: f[name][sel] for name in names}
+        out["attrs"] = dict(f.attrs)
+    return out
+
+
+# ------------------------------------------------------------------------------ running
+@dataclasses.dataclass
+class BatchSummary:
+    """What :func:`run_batch` measured."""
+
+    n: int
+    converged: int
+    stable: int
+    wall_s: float
+    first_chunk_s: float  # includes compiling the solver and the output kernels
+    chunks: int
+    chunk_size: int
+    peak_memory_mib: float
+    max_residual_converged: float
+
+    @property
+    def converged_fraction(self) -> float:
+        return self.converged / self.n
+
+    @property
+    def equilibria_per_s(self) -> float:
+        """All rows over the whole wall time (compilation included)."""
+        return self.n / self.wall_s
+
+    @property
+    def warm_equilibria_per_s(self) -> float | None:
+        """Rows after the first chunk over their wall time (None with a single chunk)."""
+        rest = self.wall_s - self.first_chunk_s
+        rows = self.n - min(self.chunk_size, self.n)
+        return rows / rest if rows > 0 and rest > 0 else None
+
+    def as_dict(self) -> dict:
+        d = dataclasses.asdict(self)
+        d.update(
+            converged_fraction=self.converged_fraction,
+            equilibria_per_s=self.equilibria_per_s,
+            warm_equilibria_per_s=self.warm_equilibria_per_s,
+        )
+        return d
+
+    def lines(self) -> list[str]:
+        warm = self.warm_equilibria_per_s
+        return [
+            f"n = {self.n}, converged {self.converged} ({self.converged_fraction:.2%}), "
+            f"stable {self.stable}",
+            f"wall {self.wall_s:.2f} s ({self.chunks} chunk(s) of {self.chunk_size}); first chunk "
+            f"{self.first_chunk_s:.2f} s (compilation included)",
+            f"equilibria/s: {self.equilibria_per_s:.1f} overall"
+            + (f", {warm:.1f} after the first chunk" if warm else ""),
+            f"largest residual of a converged row: {self.max_residual_converged:.2e}",
+            f"peak memory (max RSS): {self.peak_memory_mib:.0f} MiB",
+        ]
+
+
+def peak_memory_mib() -> float:
+    """Peak resident memory of this process (MiB), from ``resource.getrusage``."""
+    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return rss / 2**20 if sys.platform == "darwin" else rss / 2**10  # bytes on macOS, KiB on Linux
+
+
+def run_batch(
+    scene: pj.Scene,
+    commands: np.ndarray,
+    path: str,
+    *,
+    chunk_size: int = 1024,
+    attrs: dict | None = None,
+    on_chunk: Callable[[int], None] | None = None,
+    **solver_options,
+) -> BatchSummary:
+    """Solve every row of ``commands`` with :func:`pacjax.iter_batch` and write each chunk to
+    the HDF5 file ``path`` as it finishes (see the module doc for the columns).
+
+    ``on_chunk(rows_done)`` is called after each chunk (a progress bar). ``solver_options``
+    go to the solver (``tol``, ``max_steps``, ``warm_start``, ``fallback``, ...).
+    """
+    commands = np.asarray(commands, float)
+    if commands.ndim != 2 or commands.shape[1] != scene.n_tendons:
+        raise ValueError(f"commands must have shape (n, {scene.n_tendons}), got {commands.shape}")
+    if isinstance(chunk_size, bool) or not isinstance(chunk_size, (int, np.integer)):
+        raise TypeError(f"chunk_size must be an integer, got {chunk_size!r}")
+    if chunk_size < 1:
+        raise ValueError(f"chunk_size must be >= 1, got {chunk_size}")
+    n = commands.shape[0]
+    chunk = min(chunk_size, n)
+    converged = stable = chunks = 0
+    max_res = 0.0
+    first = None
+    start = time.perf_counter()
+    parts = pj.iter_batch(scene, commands, chunk_size=chunk, **solver_options)
+    with BatchWriter(path, scene, n, attrs, chunk_rows=chunk) as writer:
+        for rows, eq in parts:
+            cols = chunk_columns(scene, commands[rows], eq)
+            writer.write(rows, cols)
+            ok = cols["converged"]
+            converged += int(ok.sum())
+            stable += int((ok & cols["stable"]).sum())
+            if ok.any():
+                max_res = max(max_res, float(cols["residual_norm"][ok].max()))
+            chunks += 1
+            if first is None:
+                first = time.perf_counter() - start
+            if on_chunk is not None:
+                on_chunk(rows.stop - rows.start)
+    wall = time.perf_counter() - start
+    return BatchSummary(
+        n=n,
+        converged=converged,
+        stable=stable,
+        wall_s=wall,
+        first_chunk_s=first,
+        chunks=chunks,
+        chunk_size=chunk,
+        peak_memory_mib=peak_memory_mib(),
+        max_residual_converged=max_res,
+    )
+
+
+# ------------------------------------------------------------------------------ plot
+def plot_workspace(path: str, png: str, max_points: int = 50_000, title: str | None = None):
+    """Tip positions of a batch file in three views (x-y, x-z, y-z, mm), converged rows in blue
+    and the others as red crosses. At most ``max_points`` evenly strided rows are drawn."""
+    import h5py
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    with h5py.File(path, "r") as f:
+        n = int(f.attrs["rows_written"])
+        step = max(1, -(-n // max_points))
+        tip = 1e3 * f["tip_position"][:n:step]
+        ok = f["converged"][:n:step]
+    fig, axes = plt.subplots(1, 3, figsize=(15, 5), constrained_layout=True)
+    size = 4 if len(tip) > 2000 else 12
+    for ax, (i, j) in zip(axes, ((0, 1), (0, 2), (1, 2)), strict=True):
+        ax.scatter(
+            tip[ok, i],
+            tip[ok, j],
+            s=size,
+            c="tab:blue",
+            alpha=0.5,
+            lw=0,
+            label=f"converged ({int(ok.sum())})",
+        )
+        if (~ok).any():
+            ax.scatter(
+                tip[~ok, i],
+                tip[~ok, j],
+                s=3 * size,
+                c="tab:red",
+                marker="x",
+                label=f"not converged ({int((~ok).sum())})",
+            )
+        ax.set_xlabel(f"{'xyz'[i]} (mm)")
+        ax.set_ylabel(f"{'xyz'[j]} (mm)")
+        ax.set_aspect("equal", adjustable="datalim")
+        ax.grid(alpha=0.3)
+    axes[0].legend(loc="best", fontsize=8)
+    shown = f"{len(tip)} of {n} rows" if step > 1 else f"{n} rows"
+    fig.suptitle((title + ": " if title else "") + f"tip workspace ({shown})")
+    fig.savefig(png, dpi=120)
+    plt.close(fig)
+    return png

@@ -1,0 +1,65 @@
+"""``pj.solve_batch`` sharded over two (virtual CPU) devices agrees with one device.
+
+XLA fixes the number of host devices when JAX starts, so the two-device run happens in a fresh
+interpreter with ``XLA_FLAGS=--xla_force_host_platform_device_count=2`` set before importing
+JAX.
+"""
+
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+
+CODE = r"""
+import json, os
+import jax
+jax.config.update("jax_compilation_cache_dir", os.environ["PACJAX_TEST_CACHE"])
+jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
+import numpy as np
+import pacjax as pj
+
+assert len(jax.devices()) == 2, jax.devices()
+# The scene of tests/test_batch.py.
+seg = pj.Segment(0.15, 0.05, 2000.0, linear_density=0.3)
+tendons = [pj.Tendon(0, a, 0.02, gain=5e3) for a in (0.0, 2 * np.pi / 3, 4 * np.pi / 3)]
+scene = pj.Scene(
+    pj.Robot([seg]),
+    pj.PolynomialCurvature(1),
+    tendons=tendons,
+    loads=(pj.Gravity(direction=(1.0, 0.0, 0.0)), pj.PointMass(0.1, 0)),
+)
+commands = np.random.default_rng(0).uniform(0.0, 0.01, (6, 3))
+two = pj.solve_batch(scene, commands, chunk_size=4)             # default: every device
+one = pj.solve_batch(scene, commands, chunk_size=4, devices=1)
+rows, first = next(pj.iter_batch(scene, commands, chunk_size=4))
+print(json.dumps({
+    "n_devices": len(jax.devices()),
+    "chunk_devices": len(first.q.devices()),
+    "chunk_rows": rows.stop - rows.start,
+    "two": np.asarray(two.q).tolist(),
+    "one": np.asarray(one.q).tolist(),
+    "converged_two": np.asarray(two.converged).tolist(),
+    "converged_one": np.asarray(one.converged).tolist(),
+}))
+"""
+
+
+def test_solve_batch_on_two_cpu_devices_matches_one_device():
+    env = dict(os.environ)
+    env["XLA_FLAGS"] = env.get("XLA_FLAGS", "") + " --xla_force_host_platform_device_count=2"
+    env["JAX_PLATFORMS"] = "cpu"
+    env["PACJAX_TEST_CACHE"] = os.environ.get(
+        "PACJAX_CACHE_DIR", os.path.join(os.path.expanduser("~"), ".cache", "pacjax-jax")
+    )
+    proc = subprocess.run(
+        [sys.executable, "-c", CODE], env=env, capture_output=True, text=True, timeout=900
+    )
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    out = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert out["n_devices"] == 2
+    # A chunk of 4 rows is split over both devices (2 rows each).
+    assert out["chunk_rows"] == 4 and out["chunk_devices"] == 2
+    assert all(out["converged_two"]) and all(out["converged_one"])
+    np.testing.assert_allclose(out["two"], out["one"], rtol=0, atol=1e-12)
