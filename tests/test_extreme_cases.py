@@ -184,8 +184,8 @@ def test_extreme_case_converges_or_says_so(case, dtype):
 
 @pytest.mark.xfail(
     strict=True,
-    reason="no modelled contraction stop: a segment contracts past "
-    "zero length (L + dL < 0) when the tendons are pulled by more than its length",
+    reason="no modelled contraction stop: tendons pulled by more than their length drive the "
+    "segments to zero length, where the tendon length is not differentiable (max steps)",
 )
 def test_contraction_past_the_end_of_range_is_stopped():
     _, eq, grad = _solve("float64", [0.25, 0.25])  # more than the 0.2 m robot
