@@ -18,6 +18,7 @@ from ._strain import StrainModel as StrainModel
 from ._tendons import Tendon as Tendon
 
 __version__ = "0.1.0"
+from . import dynamics as dynamics
 from . import presets as presets
 from ._api import astype as astype
 from ._api import backbone as backbone
@@ -31,6 +32,9 @@ from ._multistart import Equilibria as Equilibria
 from ._multistart import find_equilibria as find_equilibria
 from ._equilibrium import solve_equilibrium as solve_equilibrium
 from ._solution import Equilibrium as Equilibrium
+from .dynamics import Damping as Damping
+from .dynamics import Trajectory as Trajectory
+from .dynamics import simulate as simulate
 from ._identify import identify as identify
 from ._fitreport import IdentificationReport as IdentificationReport
 from ._mocap import MocapDataset as MocapDataset

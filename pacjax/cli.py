@@ -558,6 +558,132 @@ def inverse(
         sys.exit(3)
 
 
+# ------------------------------------------------------------------------------ simulate
+@cli.command()
+@click.argument("scene_file", type=click.Path(exists=True, dir_okay=False))
+@click.option(
+    "--controls",
+    help="Comma-separated controls stepped to at t = 0, one per tendon (m pull-in, or N "
+    "tension); default: the file's `controls`, else zeros.",
+)
+@click.option(
+    "--duration",
+    default=2.0,
+    show_default=True,
+    type=click.FloatRange(min=0, min_open=True),
+    help="Simulated time, s.",
+)
+@click.option(
+    "--start",
+    type=click.Choice(["equilibrium", "straight"]),
+    default="equilibrium",
+    show_default=True,
+    help="Initial state: at rest in the equilibrium under zero controls (a step in commands), "
+    "or straight and at rest.",
+)
+@click.option(
+    "--damping-ratio",
+    default=0.05,
+    show_default=True,
+    type=click.FloatRange(min=0),
+    help="Damping ratio of the lowest mode (stiffness-proportional damping).",
+)
+@click.option("--fps", default=20, show_default=True, type=click.IntRange(min=1))
+@click.option(
+    "--out",
+    default=".",
+    show_default=True,
+    type=click.Path(file_okay=False),
+    help="Directory for <name>_sim.gif, <name>_tip.png and <name>_sim.json.",
+)
+def simulate(
+    scene_file: str,
+    controls: str | None,
+    duration: float,
+    start: str,
+    damping_ratio: float,
+    fps: int,
+    out: str,
+):
+    """Simulate the dynamics of a TOML scene file after a step in commands."""
+    from . import animation
+    from .scenefile import load_scene
+
+    try:
+        scene, file_controls, extra = load_scene(scene_file)
+    except (ValueError, OSError) as err:
+        raise click.ClickException(str(err)) from None
+    if controls is not None:
+        u = _parse_controls(controls, scene.n_tendons)
+    elif file_controls is not None:
+        u = file_controls
+    else:
+        u = np.zeros(scene.n_tendons)
+    out = _output_dir(out)
+    name = extra["name"]
+    q0 = None
+    if start == "equilibrium":
+        eq, _ = _timed_solve(scene, np.zeros(scene.n_tendons), **extra["solver"])
+        if not bool(eq.converged):
+            raise click.ClickException(f"{scene_file}: the initial equilibrium did not converge")
+        q0 = eq.q
+    n_frames = max(2, int(round(duration * fps)) + 1)
+    try:
+        damping = pj.Damping.modal(scene, damping_ratio)
+        begin = time.perf_counter()
+        trajectory = pj.simulate(
+            scene,
+            (0.0, duration),
+            u,
+            q0=q0,
+            saveat=np.linspace(0.0, duration, n_frames),
+            damping=damping,
+        )
+        jax.block_until_ready(trajectory)
+        seconds = time.perf_counter() - begin
+    except ValueError as err:
+        raise click.ClickException(f"{scene_file}: {err}") from None
+    ok = bool(trajectory.success)
+    tips = animation.tip_positions(scene, trajectory)
+    result = {
+        "scene": os.path.abspath(scene_file),
+        "name": name,
+        "model": type(scene.model).__name__,
+        "controls": [float(v) for v in u],
+        "start": start,
+        "damping_ratio": damping_ratio,
+        "success": ok,
+        "steps": int(trajectory.num_steps),
+        "wall_time_s": seconds,
+        "t": [float(v) for v in np.asarray(trajectory.ts)],
+        "q": np.asarray(trajectory.q).tolist(),
+        "tip_position": tips.tolist(),
+        "units": "SI: s, m, rad; wall time includes compilation",
+    }
+    json_path = os.path.join(out, f"{name}_sim.json")
+    with open(json_path, "w", encoding="utf-8") as f:
+        json.dump(result, f)
+        f.write("\n")
+    status = "reached the end" if ok else "FAILED before the end (step limit or solver failure)"
+    click.echo(
+        f"{name}: {duration:g} s simulated, {status}, {result['steps']} steps, "
+        f"{seconds:.1f} s wall (compilation included)"
+    )
+    t = 1e3 * tips[-1]
+    click.echo(f"final tip position: x {t[0]:.1f} mm, y {t[1]:.1f} mm, z {t[2]:.1f} mm")
+    click.echo(f"wrote {json_path}")
+    title = f"{name}: " + (extra["description"] or os.path.basename(scene_file))
+    png_path = os.path.join(out, f"{name}_tip.png")
+    animation.plot_tip_trajectory(scene, trajectory, png_path, title=title)
+    click.echo(f"wrote {png_path}")
+    if ok:
+        gif_path = os.path.join(out, f"{name}_sim.gif")
+        animation.animate_trajectory(scene, trajectory, gif_path, fps=fps, title=name)
+        click.echo(f"wrote {gif_path}")
+    else:
+        sys.exit(3)
+
+
 # ------------------------------------------------------------------------------ batch
 def _per_tendon(text: str | None, option: str):
     """``--low``/``--high``: one number, or comma-separated numbers (one per tendon)."""

@@ -1,0 +1,475 @@
+"""Dynamics: the paper's full model (its eq. 7), integrated with diffrax.
+
+    M(q) qddot + C(q, qdot) qdot + G(q) + D qdot + K(q) = A(q) f_act + Q_ext(q)
+
+- ``M`` and ``C qdot`` come from the kinetic energy of the body and point masses by automatic
+  differentiation (:mod:`pacjax._inertia`); ``G + K`` is the gradient of the scene's potential
+  energy without its tendons (elasticity, gravity, world-fixed forces); ``Q_ext`` the follower
+  forces and point moments.
+- ``D`` is Rayleigh damping (:class:`Damping`): ``alpha M(q) + beta K_0``, ``K_0`` the Hessian
+  of the elastic energy of the straight robot at rest. Default: stiffness-proportional, with
+  ``beta`` giving a 5 % damping ratio to the lowest mode of the straight, unloaded body.
+- Tendons: ``A(q) f_act = -(dl/dq)^T tau`` with the motor PD law
+  ``tau = max(kappa_P (l - l_bar) + kappa_D (l_dot - l_bar_dot), 0)``, ``l_bar = l_rest - u(t)``:
+  the paper's ``f_act = kappa_D (l_bar_dot - l_dot) + kappa_P (l_bar - l)`` taken as the pull of
+  the tendon, clipped at zero because a tendon cannot push. Clipping the sum (not gating it by
+  ``l > l_bar``) keeps the force continuous in the state, which the implicit solver needs;
+  at rest velocity it is exactly the statics' tension ``kappa_P max(l - l_bar, 0)``, so a
+  damped motion settles on :func:`pacjax.solve_equilibrium`'s state. The default
+  ``kappa_D = beta kappa_P`` damps the tendon springs like the body (stiffness-proportional).
+  Tension-mode tendons pull with the commanded tension.
+
+The state ``(q, qdot)`` is integrated by an implicit Runge-Kutta method (default
+``diffrax.Kvaerno5``, L-stable, 5th order) with adaptive steps (PID controller): the tendon
+springs are stiff against the soft body. Gradients of a trajectory with respect to any scene or
+damping parameter, the initial state or the controls go through diffrax's checkpointed adjoint.
+"""
+
+import math
+from collections.abc import Callable
+
+import diffrax
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import lineax as lx
+import numpy as np
+from jaxtyping import Array, Bool, Float, Int
+
+from ._equilibrium import as_traced_leaves, check_controls, check_q, solver_dtype
+from ._inertia import (
+    PHI_INERTIA_FACTOR,
+    body_dynamics,
+    coriolis_forces,
+    kinetic_energy,
+    mass_matrix,
+)
+from ._robot import as_float, check_positive, concrete
+from ._scene import Scene
+
+__all__ = [
+    "Damping",
+    "Trajectory",
+    "simulate",
+    "mass_matrix",
+    "kinetic_energy",
+    "coriolis_forces",
+    "total_energy",
+    "accelerations",
+    "natural_frequencies",
+    "DEFAULT_DAMPING_RATIO",
+]
+
+#: Damping ratio of the lowest mode of the straight body under the default damping.
+DEFAULT_DAMPING_RATIO = 0.05
+
+
+# ------------------------------------------------------------------------------ damping
+class Damping(eqx.Module):
+    """Rayleigh damping of the body and derivative gains of the tendon motors.
+
+    ``D(q) = mass * M(q) + stiffness * K_0`` with ``K_0`` the Hessian of the elastic energy of
+    the straight robot at rest (a constant matrix).
+
+    Args:
+        mass: ``alpha`` (1/s), mass-proportional coefficient.
+        stiffness: ``beta`` (s), stiffness-proportional coefficient (damping ratio
+            ``beta omega / 2`` for a mode of angular frequency ``omega``).
+        tendon: ``kappa_D`` (N s/m) of the motors, one per tendon or one for all; None:
+            ``beta kappa_P`` (the tendon springs damped like the body).
+
+    ``Damping()`` is no damping at all (energy is conserved); :meth:`modal` picks ``beta`` for
+    a damping ratio.
+    """
+
+    mass: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    stiffness: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    tendon: Float[Array, "*m"] | None = None
+
+    def __init__(self, mass=0.0, stiffness=0.0, tendon=None):
+        self.mass = mass
+        self.stiffness = stiffness
+        self.tendon = None if tendon is None else as_float(tendon)
+
+    def __check_init__(self):
+        for name in ("mass", "stiffness"):
+            value = getattr(self, name)
+            if jnp.shape(value) != ():
+                raise ValueError(f"Damping.{name} must be a single number, got {jnp.shape(value)}")
+            check_positive(f"Damping.{name}", value, allow_zero=True)
+        if self.tendon is not None:
+            if jnp.ndim(self.tendon) > 1:
+                raise ValueError("Damping.tendon must be a number or one number per tendon")
+            check_positive("Damping.tendon", self.tendon, allow_zero=True)
+
+    @classmethod
+    def modal(cls, scene: Scene, ratio: float = DEFAULT_DAMPING_RATIO, **kwargs) -> "Damping":
+        """Stiffness-proportional damping with damping ratio ``ratio`` on the lowest mode of
+        the straight robot at rest (elasticity and inertia only)."""
+        if not (np.isfinite(ratio) and ratio >= 0):
+            raise ValueError(f"ratio must be a finite number >= 0, got {ratio}")
+        dtype = solver_dtype(scene)
+        omega = jnp.sqrt(jnp.min(_rest_eigenvalues(scene, dtype)))
+        return cls(stiffness=2.0 * ratio / omega, **kwargs)
+
+    def tendon_gains(self, scene: Scene, dtype) -> Float[Array, " m"]:
+        """``kappa_D`` (N s/m) per tendon (tension-mode tendons ignore theirs)."""
+        if self.tendon is not None:
+            return jnp.broadcast_to(self.tendon.astype(dtype), (scene.n_tendons,))
+        gains = [t.gain if t.mode == "length" else jnp.zeros(()) for t in scene.tendons]
+        return self.stiffness.astype(dtype) * jnp.stack(gains).astype(dtype)
+
+
+@eqx.filter_jit
+def _rest_eigenvalues(scene: Scene, dtype):
+    q = scene.zeros(dtype)
+    stiffness = jax.hessian(scene.elastic_energy)(q)
+    return _generalised_eigenvalues(stiffness, mass_matrix(scene, q))
+
+
+def _generalised_eigenvalues(stiffness, mass):
+    """Eigenvalues of ``M^-1 K`` for symmetric ``K`` and positive definite ``M``."""
+    chol = jnp.linalg.cholesky(mass)
+    inv = jax.scipy.linalg.solve_triangular(
+        chol, jnp.eye(mass.shape[0], dtype=mass.dtype), lower=True
+    )
+    return jnp.linalg.eigvalsh(inv @ (0.5 * (stiffness + stiffness.T)) @ inv.T)
+
+
+# ------------------------------------------------------------------------------ forces
+class _Model(eqx.Module):
+    """What the vector field needs, built once per simulation."""
+
+    scene: Scene
+    passive: Scene  # the scene without its tendons: their force is the motor law
+    damping: Damping
+    stiffness_rest: Array  # K_0
+    tendon_damping: Array | None
+    phi_inertia: float = eqx.field(static=True)
+
+    @staticmethod
+    def build(scene: Scene, damping: Damping, phi_inertia: float, dtype) -> "_Model":
+        passive = Scene(
+            scene.robot,
+            scene.model,
+            loads=scene.loads,
+            quadrature_points=scene.quadrature_points,
+            rotation_substeps=scene.rotation_substeps,
+        )
+        k0 = jax.hessian(scene.elastic_energy)(scene.zeros(dtype))
+        kd = damping.tendon_gains(scene, dtype) if scene.tendons else None
+        return _Model(scene, passive, damping, k0, kd, phi_inertia)
+
+    def tendon_forces(self, q, qdot, u, udot):
+        """``A(q) f_act``: generalised forces of the tendons under the motor PD law."""
+        scene = self.scene
+        lengths, lin = jax.linearize(scene.tendon_lengths, q)
+        rates = lin(qdot)
+        rest = scene.rest_tendon_lengths(q.dtype)
+        tension = []
+        for i, t in enumerate(scene.tendons):
+            if t.mode == "length":
+                stretch = lengths[i] - (rest[i] - u[i])
+                stretch_rate = rates[i] + udot[i]
+                pull = t.gain.astype(q.dtype) * stretch + self.tendon_damping[i] * stretch_rate
+                tension.append(jnp.maximum(pull, 0.0))
+            else:
+                tension.append(u[i])
+        (force,) = jax.linear_transpose(lin, q)(-jnp.stack(tension))
+        return force
+
+    def accelerations(self, q, qdot, u, udot):
+        """``qddot`` from ``M qddot = -C qdot - G - K - D qdot + A f_act + Q_ext``."""
+        mass, bias = body_dynamics(self.scene, q, qdot, self.phi_inertia)
+        force = -jax.grad(self.passive.potential_energy)(q, u) - bias
+        extra = self.passive.nonconservative_forces(q)
+        if extra is not None:
+            force = force + extra
+        if self.scene.tendons:
+            force = force + self.tendon_forces(q, qdot, u, udot)
+        force = force - self.stiffness_rest @ (self.damping.stiffness * qdot)
+        force = force - self.damping.mass * (mass @ qdot)
+        operator = lx.MatrixLinearOperator(mass, lx.positive_semidefinite_tag)
+        return lx.linear_solve(operator, force, lx.Cholesky()).value
+
+
+def _control_fn(controls, n_tendons: int, dtype) -> Callable:
+    """``t -> (u, du/dt)`` for constant or callable controls."""
+    if controls is None:
+        zero = jnp.zeros(n_tendons, dtype)
+        return lambda t: (zero, zero)
+    if callable(controls):
+
+        def fn(t):
+            u, udot = jax.jvp(lambda x: jnp.asarray(controls(x), dtype), (t,), (jnp.ones_like(t),))
+            return u, udot
+
+        return fn
+    return lambda t: (controls, jnp.zeros_like(controls))
+
+
+# ------------------------------------------------------------------------------ public helpers
+def accelerations(
+    scene: Scene,
+    q,
+    qdot,
+    controls=None,
+    controls_rate=None,
+    damping: Damping | None = None,
+    phi_inertia: float = PHI_INERTIA_FACTOR,
+) -> Float[Array, " n_dofs"]:
+    """``qddot`` of the full model at ``(q, qdot)`` under ``controls`` changing at
+    ``controls_rate`` (per second). ``damping`` None: no damping."""
+    q = jnp.asarray(q)
+    dtype = q.dtype
+    u = scene.default_controls(dtype) if controls is None else jnp.asarray(controls, dtype)
+    udot = jnp.zeros_like(u) if controls_rate is None else jnp.asarray(controls_rate, dtype)
+    model = _Model.build(scene, Damping() if damping is None else damping, phi_inertia, dtype)
+    return model.accelerations(q, jnp.asarray(qdot, dtype), u, udot)
+
+
+def total_energy(
+    scene: Scene, q, qdot, controls=None, phi_inertia: float = PHI_INERTIA_FACTOR
+) -> Float[Array, ""]:
+    """Kinetic plus potential energy (J), tendons included with their static (spring) energy.
+
+    Conserved by undamped motions under constant controls (with ``kappa_D = 0``) when every
+    load is conservative.
+    """
+    q = jnp.asarray(q)
+    u = scene.default_controls(q.dtype) if controls is None else jnp.asarray(controls, q.dtype)
+    return kinetic_energy(scene, q, jnp.asarray(qdot, q.dtype), phi_inertia) + (
+        scene.potential_energy(q, u)
+    )
+
+
+def natural_frequencies(
+    scene: Scene, q=None, controls=None, phi_inertia: float = PHI_INERTIA_FACTOR
+) -> Float[Array, " n_dofs"]:
+    """Undamped natural frequencies (Hz, ascending) of small motions about ``q``.
+
+    Eigenvalues of ``M^-1 K``, ``K`` the Hessian of the potential energy (tendons as springs)
+    at ``q`` (an equilibrium, e.g. ``solve_equilibrium(...).q``; default straight). A negative
+    eigenvalue (an unstable equilibrium) gives a NaN frequency. Conservative scenes only.
+    """
+    if not scene.is_conservative:
+        raise ValueError(
+            "natural_frequencies needs a conservative scene (no follower force or moment)"
+        )
+    dtype = solver_dtype(scene)
+    q = check_q(scene, q, dtype)
+    u = check_controls(scene, controls, dtype)
+    return _frequencies(as_traced_leaves(scene, dtype), q, u, phi_inertia)
+
+
+@eqx.filter_jit
+def _frequencies(scene, q, u, phi_inertia):
+    stiffness = jax.hessian(scene.potential_energy)(q, u)
+    eig = _generalised_eigenvalues(stiffness, mass_matrix(scene, q, phi_inertia))
+    return jnp.sqrt(jnp.where(eig >= 0, eig, jnp.nan)) / (2 * math.pi)
+
+
+# ------------------------------------------------------------------------------ simulate
+class Trajectory(eqx.Module):
+    """A simulated motion.
+
+    Attributes:
+        ts: (k,) save times (s).
+        q: (k, n_dofs) configurations; ``qdot``: (k, n_dofs) velocities (per second).
+        success: whether the integration reached the final time (False: step limit hit or the
+            solver failed; later saves are then infinite).
+        num_steps: accepted plus rejected steps; ``num_accepted_steps``.
+        solution: the diffrax solution (for :meth:`evaluate`) when simulated with ``dense``.
+    """
+
+    ts: Float[Array, " k"]
+    q: Float[Array, "k n_dofs"]
+    qdot: Float[Array, "k n_dofs"]
+    success: Bool[Array, ""]
+    num_steps: Int[Array, ""]
+    num_accepted_steps: Int[Array, ""]
+    solution: diffrax.Solution | None = None
+
+    def evaluate(self, t) -> tuple[Float[Array, "*k n_dofs"], Float[Array, "*k n_dofs"]]:
+        """``(q, qdot)`` at any time(s) in the span, from the solver's dense output."""
+        if self.solution is None:
+            raise ValueError("Trajectory.evaluate needs simulate(..., dense=True)")
+        t = jnp.asarray(t, self.ts.dtype)
+        if t.ndim == 0:
+            return self.solution.evaluate(t)
+        return jax.vmap(self.solution.evaluate)(t)
+
+
+class _Options(eqx.Module):
+    solver: diffrax.AbstractSolver = eqx.field(static=True)
+    rtol: float = eqx.field(static=True)
+    atol: float = eqx.field(static=True)
+    max_steps: int = eqx.field(static=True)
+    dense: bool = eqx.field(static=True)
+    phi_inertia: float = eqx.field(static=True)
+    adjoint: diffrax.AbstractAdjoint = eqx.field(static=True)
+
+
+def simulate(
+    scene: Scene,
+    t_span,
+    controls=None,
+    q0=None,
+    qdot0=None,
+    saveat=None,
+    *,
+    damping: Damping | None = None,
+    solver: diffrax.AbstractSolver | None = None,
+    rtol: float = 1e-7,
+    atol: float = 1e-9,
+    dt0=None,
+    max_steps: int = 100_000,
+    dense: bool = False,
+    phi_inertia: float = PHI_INERTIA_FACTOR,
+    adjoint: diffrax.AbstractAdjoint | None = None,
+) -> Trajectory:
+    """Simulate the full dynamics of ``scene`` over ``t_span = (t0, t1)`` (s).
+
+    Args:
+        scene: the :class:`Scene` (every segment needs ``linear_density > 0``).
+        t_span: ``(t0, t1)``, s.
+        controls: (n_tendons,) constant controls (pull-in in m, or tension in N), or a callable
+            ``t -> (n_tendons,)`` (differentiable in ``t``: its derivative is the commanded
+            ``l_bar_dot``; pass the same function object again to reuse the compiled solver).
+            Default zeros.
+        q0, qdot0: initial state (default straight and at rest).
+        saveat: times (s) to save at (default 101 evenly spaced over ``t_span``).
+        damping: a :class:`Damping`; default :meth:`Damping.modal` (5 % on the lowest mode,
+            stiffness-proportional, motors ``kappa_D = beta kappa_P``). ``Damping()``: none.
+        solver: a diffrax solver (default ``diffrax.Kvaerno5()``; a non-stiff one such as
+            ``diffrax.Tsit5()`` only suits scenes without stiff tendons).
+        rtol, atol: tolerances of the adaptive step size (``atol`` in the state's SI units).
+        dt0: first step (s); default chosen by the solver.
+        max_steps: step limit (the trajectory reports ``success=False`` beyond it).
+        dense: keep the dense output (:meth:`Trajectory.evaluate`).
+        phi_inertia: regularising inertia factor on PCC/PAC's ``phi`` (see
+            :mod:`pacjax._inertia`).
+        adjoint: diffrax adjoint for gradients (default ``RecursiveCheckpointAdjoint``).
+
+    Returns:
+        A :class:`Trajectory`; differentiable with respect to scene parameters, damping,
+        controls and initial state.
+    """
+    if not isinstance(scene, Scene):
+        raise TypeError(f"scene must be a pacjax.Scene, got {type(scene).__name__}")
+    dtype = solver_dtype(scene)
+    for i, seg in enumerate(scene.robot.segments):
+        density = concrete(seg.linear_density)
+        if density is not None and not density > 0:
+            raise ValueError(
+                f"Robot.segments[{i}].linear_density must be > 0 to simulate dynamics "
+                f"(the mass matrix would be singular), got {density}"
+            )
+    if scene.model.has_twist_strain():
+        for i, seg in enumerate(scene.robot.segments):
+            radius = concrete(seg.radius)
+            if radius is not None and not radius > 0:
+                raise ValueError(
+                    f"Robot.segments[{i}].radius must be > 0 to simulate a twisting model "
+                    "(twist moves no mass on a zero-radius body)"
+                )
+    t0, t1 = _check_span(t_span)
+    ts = _check_saveat(saveat, t0, t1)
+    if callable(controls):
+        shape = jax.eval_shape(controls, jnp.asarray(t0, dtype)).shape
+        if shape != (scene.n_tendons,):
+            raise ValueError(
+                f"controls(t) must return shape ({scene.n_tendons},) (one per tendon), got {shape}"
+            )
+    else:
+        controls = check_controls(scene, controls, dtype)
+    q0 = check_q(scene, q0, dtype)
+    if qdot0 is None:
+        qdot0 = jnp.zeros(scene.n_dofs, dtype)
+    elif np.shape(qdot0) != (scene.n_dofs,):
+        raise ValueError(f"qdot0 must have shape ({scene.n_dofs},), got {np.shape(qdot0)}")
+    qdot0 = jnp.asarray(qdot0, dtype)
+    if not (rtol > 0 and atol > 0):
+        raise ValueError(f"rtol and atol must be > 0, got {rtol}, {atol}")
+    if max_steps < 1:
+        raise ValueError(f"max_steps must be >= 1, got {max_steps}")
+    if not phi_inertia >= 0:
+        raise ValueError(f"phi_inertia must be >= 0, got {phi_inertia}")
+    scene = as_traced_leaves(scene, dtype)
+    if damping is None:
+        damping = Damping.modal(scene)
+    elif not isinstance(damping, Damping):
+        raise TypeError(f"damping must be a pacjax.Damping, got {type(damping).__name__}")
+    if damping.tendon is not None and jnp.ndim(damping.tendon) == 1:
+        if damping.tendon.shape != (scene.n_tendons,):
+            raise ValueError(
+                f"Damping.tendon must have shape ({scene.n_tendons},), got {damping.tendon.shape}"
+            )
+    opts = _Options(
+        solver=diffrax.Kvaerno5() if solver is None else solver,
+        rtol=float(rtol),
+        atol=float(atol),
+        max_steps=int(max_steps),
+        dense=bool(dense),
+        phi_inertia=float(phi_inertia),
+        adjoint=diffrax.RecursiveCheckpointAdjoint() if adjoint is None else adjoint,
+    )
+    span = jnp.asarray([t0, t1], dtype)
+    dt0 = None if dt0 is None else jnp.asarray(dt0, dtype)
+    return _simulate(scene, damping, controls, q0, qdot0, span, jnp.asarray(ts, dtype), dt0, opts)
+
+
+def _check_span(t_span) -> tuple[float, float]:
+    span = np.asarray(t_span, dtype=float)
+    if span.shape != (2,) or not np.all(np.isfinite(span)) or not span[1] > span[0]:
+        raise ValueError(f"t_span must be (t0, t1) with finite t1 > t0, got {t_span!r}")
+    return float(span[0]), float(span[1])
+
+
+def _check_saveat(saveat, t0: float, t1: float) -> np.ndarray:
+    if saveat is None:
+        return np.linspace(t0, t1, 101)
+    ts = np.atleast_1d(np.asarray(saveat, dtype=float))
+    if ts.ndim != 1 or ts.size == 0:
+        raise ValueError(f"saveat must be a 1D array of times, got shape {ts.shape}")
+    if np.any(~np.isfinite(ts)) or np.any(ts < t0) or np.any(ts > t1):
+        raise ValueError(f"saveat times must lie in t_span [{t0}, {t1}]")
+    if np.any(np.diff(ts) < 0):
+        raise ValueError("saveat times must be non-decreasing")
+    return ts
+
+
+@eqx.filter_jit
+def _simulate(scene, damping, controls, q0, qdot0, span, ts, dt0, opts: _Options):
+    dtype = q0.dtype
+    model = _Model.build(scene, damping, opts.phi_inertia, dtype)
+    control = _control_fn(controls, scene.n_tendons, dtype)
+
+    def vector_field(t, y, args):
+        q, qdot = y
+        u, udot = control(t)
+        return qdot, model.accelerations(q, qdot, u, udot)
+
+    sol = diffrax.diffeqsolve(
+        diffrax.ODETerm(vector_field),
+        opts.solver,
+        t0=span[0],
+        t1=span[1],
+        dt0=dt0,
+        y0=(q0, qdot0),
+        saveat=diffrax.SaveAt(ts=ts, dense=opts.dense),
+        stepsize_controller=diffrax.PIDController(rtol=opts.rtol, atol=opts.atol),
+        max_steps=opts.max_steps,
+        adjoint=opts.adjoint,
+        throw=False,
+    )
+    q, qdot = sol.ys
+    return Trajectory(
+        ts=sol.ts,
+        q=q,
+        qdot=qdot,
+        success=sol.result == diffrax.RESULTS.successful,
+        num_steps=sol.stats["num_steps"],
+        num_accepted_steps=sol.stats["num_accepted_steps"],
+        solution=sol if opts.dense else None,
+    )

@@ -1,0 +1,254 @@
+"""Dynamics: inertia by autodiff, consistency with statics, modal frequencies, simulation.
+
+One small scene structure (one segment, linear polynomial curvature, 4 Gauss points, gravity,
+an end mass and two length-mode tendons) is shared by the default tests, so that the simulator
+compiles once for them. The checks:
+
+- ``M`` is the Hessian of the kinetic energy in ``qdot``; the forward-mode Coriolis forces equal
+  the Lagrangian reference and the Christoffel form of ``dM/dq``;
+- at rest velocity the dynamic forces are minus the static residual (motor law = statics);
+- the first bending frequency of a uniform cantilever matches Euler-Bernoulli within 2 %;
+- a damped step response settles on ``solve_equilibrium``'s state within 1e-6;
+- (slow) the undamped, unactuated energy drifts by less than 1e-6 over 100 periods, the
+  gradient of a trajectory with respect to the damping matches finite differences, and a
+  simulated free vibration has the modal frequency.
+"""
+
+import math
+
+import diffrax
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import pacjax as pj
+from pacjax import dynamics as dyn
+from pacjax._inertia import body_dynamics, coriolis_forces, kinetic_energy, mass_matrix
+
+HANGING = np.diag([1.0, -1.0, -1.0])
+
+
+def _scene(density=0.3):
+    segment = pj.Segment(0.15, 0.02, 600.0, linear_density=density, radius=0.012)
+    guides = (0.0, 0.5, 1.0)
+    tendons = (
+        pj.Tendon(0, 0.0, 0.01, gain=2.0e3, guides=guides),
+        pj.Tendon(0, 2.1, 0.01, gain=2.0e3, guides=guides),
+    )
+    loads = (pj.Gravity(), pj.PointMass(0.03, 0, 1.0))
+    return pj.Scene(
+        pj.Robot([segment], base_rotation=HANGING),
+        pj.PolynomialCurvature(order=1),
+        tendons=tendons,
+        loads=loads,
+        quadrature_points=4,
+    )
+
+
+SCENE = _scene()
+CONTROLS = jnp.array([0.008, 0.002])
+RNG = np.random.default_rng(0)
+Q = jnp.asarray(RNG.normal(size=SCENE.n_dofs) * 0.3).at[-1].set(-0.004)
+QDOT = jnp.asarray(RNG.normal(size=SCENE.n_dofs))
+
+
+@eqx.filter_jit
+def _inertia_terms(scene, q, qdot):
+    mass, bias = body_dynamics(scene, q, qdot)
+    hessian = jax.hessian(lambda v: kinetic_energy(scene, q, v))(qdot)
+    d_mass = jax.jacfwd(lambda x: mass_matrix(scene, x))(q)  # [i, j, k] = dM_ij / dq_k
+    return mass, bias, hessian, d_mass, coriolis_forces(scene, q, qdot)
+
+
+def test_inertia_by_autodiff():
+    mass, bias, hessian, d_mass, lagrangian = _inertia_terms(SCENE, Q, QDOT)
+    scale = float(jnp.max(jnp.abs(mass)))
+    assert jnp.max(jnp.abs(mass - hessian)) < 1e-12 * scale
+    assert jnp.min(jnp.linalg.eigvalsh(mass)) > 0
+    christoffel = jnp.einsum("ijk,j,k->i", d_mass, QDOT, QDOT) - 0.5 * jnp.einsum(
+        "jki,j,k->i", d_mass, QDOT, QDOT
+    )
+    size = float(jnp.max(jnp.abs(christoffel)))
+    assert size > 0
+    assert jnp.max(jnp.abs(bias - christoffel)) < 1e-9 * size
+    assert jnp.max(jnp.abs(bias - lagrangian)) < 1e-9 * size
+
+
+def test_rest_velocity_recovers_statics():
+    """M qddot = -F(q) at qdot = 0: the motor PD law reduces to the statics' tendon tension."""
+    zero = jnp.zeros(SCENE.n_dofs)
+    qddot = jax.jit(lambda q: dyn.accelerations(SCENE, q, zero, CONTROLS))(Q)
+    mass = jax.jit(lambda q: mass_matrix(SCENE, q))(Q)
+    residual = SCENE.residual(Q, CONTROLS)
+    assert jnp.max(jnp.abs(mass @ qddot + residual)) < 1e-9 * jnp.max(jnp.abs(residual))
+
+
+def test_slack_tendon_cannot_push():
+    """A tendon longer than its commanded length does nothing, whatever the velocity."""
+    q = jnp.zeros(SCENE.n_dofs)
+    qdot = jnp.zeros(SCENE.n_dofs).at[0].set(5.0)  # bending fast: one tendon shortens
+    controls = jnp.array([-0.01, -0.01])  # commands longer than the rest lengths: both slack
+    model = dyn._Model.build(SCENE, pj.Damping(stiffness=0.05), 1e-6, q.dtype)
+    force = model.tendon_forces(q, qdot, controls, jnp.zeros(2))
+    assert jnp.all(force == 0.0)
+    # taut and stretching: the derivative gain adds to the pull
+    taut = model.tendon_forces(q, qdot, jnp.array([0.001, 0.001]), jnp.zeros(2))
+    still = model.tendon_forces(q, jnp.zeros_like(qdot), jnp.array([0.001, 0.001]), jnp.zeros(2))
+    assert jnp.max(jnp.abs(taut - still)) > 0
+
+
+def _cantilever(model, n_segments, ei=0.05, density=0.4, length=0.3):
+    segments = [pj.Segment(length / n_segments, ei, 1e5, linear_density=density)] * n_segments
+    return pj.Scene(pj.Robot(segments), model), ei, density, length
+
+
+def test_cantilever_first_frequency_matches_euler_bernoulli():
+    scene, ei, density, length = _cantilever(pj.PolynomialCurvature(order=3), 2)
+    expected = 1.8751**2 * math.sqrt(ei / (density * length**4)) / (2 * math.pi)
+    freqs = np.asarray(dyn.natural_frequencies(scene))
+    # two bending planes: the lowest pair is the first bending mode
+    assert abs(freqs[0] / expected - 1) < 0.02
+    assert abs(freqs[1] / expected - 1) < 0.02
+    assert freqs[2] > 5 * expected  # the next mode is the second bending mode
+
+
+def test_damped_motion_settles_on_equilibrium():
+    eq = pj.solve_equilibrium(SCENE, CONTROLS, tol=1e-12)
+    assert bool(eq.converged)
+    traj = pj.simulate(
+        SCENE,
+        (0.0, 4.0),
+        CONTROLS,
+        saveat=[0.0, 2.0, 4.0],
+        damping=pj.Damping.modal(SCENE, 0.7),
+        rtol=1e-9,
+        atol=1e-11,
+    )
+    assert bool(traj.success)
+    assert float(jnp.max(jnp.abs(traj.q[0]))) == 0.0
+    assert float(jnp.max(jnp.abs(traj.q[-1] - eq.q))) < 1e-6
+    assert float(jnp.max(jnp.abs(traj.qdot[-1]))) < 1e-5
+
+
+def test_input_validation():
+    with pytest.raises(ValueError, match="linear_density"):
+        pj.simulate(_scene(density=0.0), (0.0, 1.0))
+    with pytest.raises(ValueError, match="t_span"):
+        pj.simulate(SCENE, (1.0, 0.0))
+    with pytest.raises(ValueError, match="saveat"):
+        pj.simulate(SCENE, (0.0, 1.0), saveat=[0.5, 2.0])
+    with pytest.raises(ValueError, match="controls"):
+        pj.simulate(SCENE, (0.0, 1.0), jnp.zeros(3))
+    with pytest.raises(ValueError, match=r"controls\(t\)"):
+        pj.simulate(SCENE, (0.0, 1.0), lambda t: jnp.zeros(3))
+    with pytest.raises(ValueError, match="qdot0"):
+        pj.simulate(SCENE, (0.0, 1.0), qdot0=jnp.zeros(2))
+    with pytest.raises(ValueError, match="Damping.stiffness"):
+        pj.Damping(stiffness=-1.0)
+    with pytest.raises(ValueError, match="Damping.tendon"):
+        pj.simulate(SCENE, (0.0, 1.0), damping=pj.Damping(tendon=jnp.ones(3)))
+    with pytest.raises(TypeError, match="damping"):
+        pj.simulate(SCENE, (0.0, 1.0), damping=0.1)
+
+
+# ------------------------------------------------------------------------------ slow
+def _free_scene():
+    """No tendons, no damping: a conservative pendulum-like body (gravity and elasticity)."""
+    segment = pj.Segment(0.15, 0.02, 600.0, linear_density=0.3, radius=0.012)
+    return pj.Scene(
+        pj.Robot([segment]),
+        pj.PolynomialCurvature(order=1),
+        loads=(pj.Gravity(),),
+        quadrature_points=4,
+    )
+
+
+@pytest.mark.slow
+def test_energy_is_conserved_over_100_periods():
+    scene = _free_scene()
+    period = 1.0 / float(dyn.natural_frequencies(scene)[0])
+    q0 = jnp.zeros(scene.n_dofs).at[0].set(0.4).at[2].set(-0.2)
+    qdot0 = jnp.zeros(scene.n_dofs).at[3].set(3.0)
+    traj = pj.simulate(
+        scene,
+        (0.0, 100 * period),
+        q0=q0,
+        qdot0=qdot0,
+        saveat=np.linspace(0.0, 100 * period, 201),
+        damping=pj.Damping(),
+        solver=diffrax.Dopri8(),
+        rtol=1e-12,
+        atol=1e-14,
+    )
+    assert bool(traj.success)
+    energy = jax.vmap(lambda q, v: dyn.total_energy(scene, q, v))(traj.q, traj.qdot)
+    kinetic = jax.vmap(lambda q, v: kinetic_energy(scene, q, v))(traj.q, traj.qdot)
+    assert float(jnp.max(kinetic)) > 0.1 * abs(float(energy[0]))  # it does move
+    assert float(jnp.max(jnp.abs(energy - energy[0]))) < 1e-6 * abs(float(energy[0]))
+
+
+@pytest.mark.slow
+def test_energy_is_conserved_by_the_default_implicit_solver():
+    """Kvaerno5 (the default) with tendons as undamped springs: 100 periods."""
+    period = 1.0 / float(dyn.natural_frequencies(SCENE, controls=CONTROLS)[0])
+    q0 = jnp.zeros(SCENE.n_dofs).at[0].set(0.3)
+    t1 = 100 * period
+    traj = pj.simulate(
+        SCENE,
+        (0.0, t1),
+        CONTROLS,
+        q0=q0,
+        saveat=np.linspace(0.0, t1, 201),
+        damping=pj.Damping(),
+        rtol=1e-11,
+        atol=1e-13,
+        max_steps=400_000,
+    )
+    assert bool(traj.success)
+    energy = jax.vmap(lambda q, v: dyn.total_energy(SCENE, q, v, CONTROLS))(traj.q, traj.qdot)
+    assert float(jnp.max(jnp.abs(energy - energy[0]))) < 1e-6 * abs(float(energy[0]))
+
+
+@pytest.mark.slow
+def test_gradient_with_respect_to_damping_matches_finite_differences():
+    q0 = jnp.zeros(SCENE.n_dofs).at[0].set(0.2)
+
+    def tip_deflection(beta):
+        traj = pj.simulate(
+            SCENE,
+            (0.0, 0.3),
+            CONTROLS,
+            q0=q0,
+            saveat=[0.3],
+            damping=pj.Damping(stiffness=beta),
+            rtol=1e-10,
+            atol=1e-12,
+        )
+        return traj.q[-1, 0]
+
+    beta = jnp.asarray(0.02)
+    grad = jax.grad(tip_deflection)(beta)
+    h = 1e-5
+    fd = (tip_deflection(beta + h) - tip_deflection(beta - h)) / (2 * h)
+    assert abs(float(grad)) > 0
+    assert abs(float(grad - fd)) < 1e-4 * abs(float(fd))
+
+
+@pytest.mark.slow
+def test_cantilever_free_vibration_frequency():
+    """Simulated free vibration of the high-order cantilever: zero crossings give the
+    Euler-Bernoulli frequency."""
+    scene, ei, density, length = _cantilever(pj.PolynomialCurvature(order=3), 2)
+    expected = 1.8751**2 * math.sqrt(ei / (density * length**4)) / (2 * math.pi)
+    mode_q0 = jnp.zeros(scene.n_dofs).at[0].set(1e-3).at[9].set(1e-3)
+    t1 = 5.0 / expected
+    ts = np.linspace(0.0, t1, 2001)
+    traj = pj.simulate(scene, (0.0, t1), q0=mode_q0, saveat=ts, damping=pj.Damping())
+    assert bool(traj.success)
+    tip = np.stack([np.asarray(pj.tip_pose(scene, q)[0]) for q in traj.q[::4]])[:, 0]
+    x = tip - tip.mean()
+    crossings = ts[::4][:-1][np.sign(x[:-1]) != np.sign(x[1:])]
+    freq = 0.5 / np.mean(np.diff(crossings))
+    assert abs(freq / expected - 1) < 0.02
