@@ -51,7 +51,8 @@ def _site(site, scene: Scene, name: str) -> tuple[int, float]:
 
 
 def with_frame_loads(scene: Scene, dataset) -> tuple[Scene, FrameLoads]:
-    """``scene`` with the dataset's payload / force appended (values 0), and their updater."""
+    """``scene`` (without marker sites) with the dataset's payload / force appended (values
+    0), and their updater."""
     loads = list(scene.loads)
     mass_index = force_index = None
     if dataset.payload_mass is not None:
@@ -64,14 +65,13 @@ def with_frame_loads(scene: Scene, dataset) -> tuple[Scene, FrameLoads]:
         seg, s = _site(dataset.force_site, scene, "force_site")
         force_index = len(loads)
         loads.append(PointForce(jnp.zeros(3), seg, s, follower=dataset.force_follower))
-    if mass_index is None and force_index is None:
-        return scene, FrameLoads()
+    # Marker sites are static structure the solver does not need: dropping them lets scenes
+    # that differ only in their markers share one compiled solver.
     new = Scene(
         scene.robot,
         scene.model,
         tendons=scene.tendons,
         loads=loads,
-        markers=scene.markers,
         quadrature_points=scene.quadrature_points,
         rotation_substeps=scene.rotation_substeps,
     )
