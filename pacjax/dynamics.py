@@ -190,7 +190,9 @@ class _Model(eqx.Module):
         force = force - self.stiffness_rest @ (self.damping.stiffness * qdot)
         force = force - self.damping.mass * (mass @ qdot)
         operator = lx.MatrixLinearOperator(mass, lx.positive_semidefinite_tag)
-        return lx.linear_solve(operator, force, lx.Cholesky()).value
+        # throw=False: a wild Newton iterate of the implicit solver gives NaN here, and diffrax
+        # must see it to reject the step (a raise would abort the whole simulation).
+        return lx.linear_solve(operator, force, lx.Cholesky(), throw=False).value
 
 
 def _control_fn(controls, n_tendons: int, dtype) -> Callable:

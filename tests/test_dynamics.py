@@ -62,6 +62,7 @@ def _inertia_terms(scene, q, qdot):
     return mass, bias, hessian, d_mass, coriolis_forces(scene, q, qdot)
 
 
+@pytest.mark.slow  # compiles second and third derivatives of the kinematics
 def test_inertia_by_autodiff():
     mass, bias, hessian, d_mass, lagrangian = _inertia_terms(SCENE, Q, QDOT)
     scale = float(jnp.max(jnp.abs(mass)))
@@ -76,6 +77,7 @@ def test_inertia_by_autodiff():
     assert jnp.max(jnp.abs(bias - lagrangian)) < 1e-9 * size
 
 
+@pytest.mark.slow  # compiles second and third derivatives of the kinematics
 def test_rest_velocity_recovers_statics():
     """M qddot = -F(q) at qdot = 0: the motor PD law reduces to the statics' tendon tension."""
     zero = jnp.zeros(SCENE.n_dofs)
@@ -114,6 +116,7 @@ def test_cantilever_first_frequency_matches_euler_bernoulli():
     assert freqs[2] > 5 * expected  # the next mode is the second bending mode
 
 
+@pytest.mark.slow  # compiles second and third derivatives of the kinematics
 def test_damped_motion_settles_on_equilibrium():
     eq = pj.solve_equilibrium(SCENE, CONTROLS, tol=1e-12)
     assert bool(eq.converged)
