@@ -12,8 +12,9 @@ from ._scene import Scene, normalise_sites
 
 
 @eqx.filter_jit
-def _frames(scene: Scene, q, segments: tuple[int, ...], s, offsets):
-    rot, pos = scene.frames(q, np.asarray(segments, np.int64), s)
+def _frames(scene: Scene, q, segments: tuple[int, ...], s: tuple[float, ...], offsets):
+    # Sites are static: the frames come from the same knot kinematics as the energy.
+    rot, pos = scene.frames(q, np.asarray(segments, np.int64), np.asarray(s, float))
     return pos + matvec3(rot, offsets.astype(q.dtype)), rot
 
 
@@ -47,7 +48,7 @@ def _configuration(scene: Scene, q) -> Array:
 def _query(scene: Scene, q, segments, s, offsets=None):
     """Compiled frame query (segments static, everything else traced)."""
     q = _configuration(scene, q)
-    s = jnp.asarray(s, q.dtype)
+    s = tuple(float(v) for v in np.asarray(s, float).reshape(-1))
     offsets = jnp.zeros((len(segments), 3), q.dtype) if offsets is None else offsets
     return _frames(scene, q, tuple(int(k) for k in segments), s, jnp.asarray(offsets, q.dtype))
 

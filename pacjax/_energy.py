@@ -94,3 +94,26 @@ def moment_cotangent(
     Virtual work ``M . dtheta`` with ``[dtheta]x = dR R^T`` gives ``Q_j = 1/2 <dR/dq_j, [M]x R>``.
     """
     return 0.5 * hat(moment_world) @ rotation
+
+
+def mass_beyond(robot: Robot, s, dtype) -> Array:
+    """``M_i(s) = int_s^1 rho A_i(v) L_i dv`` (kg): the mass of segment ``i`` beyond ``s``.
+
+    The weight of a segment is ``-g . int_0^1 rho A L p(v) dv``; integrating by parts, with
+    ``p' = (L + dL) R e_z``, it is ``-g . (M(0) p(0) + (L + dL) int_0^1 M(s) R(s) e_z ds)``, so
+    the kinematics' own position nodes give it with no extra points. Mass uses the rest length
+    ``L`` (a contracted segment is denser, not lighter). Exact for the polynomial density of a
+    linear taper (4-point Gauss-Legendre on ``[s, 1]``).
+    """
+    nodes, weights = gauss_legendre(4)
+    out = []
+    for i, seg in enumerate(robot.segments):
+        si = jnp.asarray(s[i], dtype)
+        v = si[..., None] + (1.0 - si[..., None]) * jnp.asarray(nodes, dtype)
+        density = seg.linear_density.astype(dtype) * jnp.ones_like(v)
+        scale = seg.section_scale(v)
+        if scale is not None:
+            density = density * scale**2
+        integral = jnp.sum(jnp.asarray(weights, dtype) * density, axis=-1)
+        out.append((1.0 - si) * integral * seg.length.astype(dtype))
+    return jnp.stack(out)

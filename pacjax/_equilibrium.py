@@ -30,6 +30,7 @@ import lineax as lx
 import numpy as np
 import optimistix as optx
 
+from ._hessian import energy_derivatives
 from ._ptc import PseudoTransientContinuation, final_code, max_abs
 from ._scene import Scene
 from ._solution import Equilibrium
@@ -49,6 +50,9 @@ class SolverOptions(eqx.Module):
         stability_tol: threshold on the smallest scaled eigenvalue for ``stable``.
         method: ``"ptc"`` (continuation, default) or ``"flow"`` (diffrax).
         flow_solver: diffrax solver of the flow method.
+        hessian: ``"structured"`` (default: per-segment forward derivatives of the kinematics,
+            :mod:`pacjax._hessian`; conservative scenes) or ``"autodiff"`` (``jax.jacfwd`` of
+            the residual). Both are exact; they differ in cost.
     """
 
     tol: float = eqx.field(static=True, default=1e-10)
@@ -60,8 +64,11 @@ class SolverOptions(eqx.Module):
     stability_tol: float | None = eqx.field(static=True, default=None)
     method: str = eqx.field(static=True, default="ptc")
     flow_solver: diffrax.AbstractSolver = eqx.field(static=True, default=diffrax.Kvaerno5())
+    hessian: str = eqx.field(static=True, default="structured")
 
     def __check_init__(self):
+        if self.hessian not in ("structured", "autodiff"):
+            raise ValueError(f"hessian must be 'structured' or 'autodiff', got {self.hessian!r}")
         if self.method not in ("ptc", "flow"):
             raise ValueError(f"method must be 'ptc' or 'flow', got {self.method!r}")
         if not self.tol > 0:
@@ -105,6 +112,13 @@ class _Scaled(eqx.Module):
             return grad * self.row, energy
         r = self.scene.residual(q, self.controls) * self.row
         return r, 0.5 * jnp.sum(r * r)
+
+    def linearise(self, y):
+        """Scaled residual and its Jacobian from the structured Hessian (conservative scenes):
+        ``(dr/dy, (r, (energy, weights)))``."""
+        energy, grad, hessian = energy_derivatives(self.scene, self.q(y), self.controls)
+        jac = self.row[:, None] * hessian * self.sigma[None, :]
+        return jac, (grad * self.row, (energy, self.weights()))
 
     def weights(self):
         """``sqrt(d) sigma``: maps scaled coordinates to ``D^1/2``-weighted ones."""
@@ -158,6 +172,7 @@ def solve_core(scene: Scene, controls, q0, opts: SolverOptions) -> Equilibrium:
         escape_size=opts.escape_size,
         stability_tol=_stability_tol(opts, q0.dtype),
         symmetric=scene.is_conservative,
+        structured=scene.is_conservative and opts.hessian == "structured",
     )
     sol = optx.root_find(
         _Scaled.root_fn,

@@ -75,6 +75,9 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
     escape_size: float = 0.05
     stability_tol: float = 1e-12
     symmetric: bool = True
+    # When True, ``args.linearise(y) -> (jacobian, (r, aux))`` gives the residual and its
+    # Jacobian together (the structured Hessian of :mod:`pacjax._hessian`) instead of jacfwd.
+    structured: bool = False
 
     def init(self, fn, y, args, options, f_struct, aux_struct, tags):
         del fn, args, options, aux_struct, tags
@@ -159,7 +162,10 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
             r, aux = fn(y_, args)
             return r, (r, aux)
 
-        jac, (r_new, (m_new, weights)) = jax.jacfwd(with_aux, has_aux=True)(y_new)
+        if self.structured:
+            jac, (r_new, (m_new, weights)) = args.linearise(y_new)
+        else:
+            jac, (r_new, (m_new, weights)) = jax.jacfwd(with_aux, has_aux=True)(y_new)
         finite = jnp.all(jnp.isfinite(r_new)) & jnp.isfinite(m_new) & jnp.all(jnp.isfinite(jac))
         accept = first | (accept & finite)
         ratio = max_abs(state.residual) / jnp.maximum(max_abs(r_new), jnp.finfo(dtype).tiny)

@@ -12,11 +12,20 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from ._energy import elastic_energy, gravity_masses, moment_cotangent
-from ._kinematics import KinematicsConfig, PointLayout, grid_frames
+from ._energy import elastic_energy, mass_beyond, moment_cotangent
+from ._kinematics import (
+    KinematicsConfig,
+    Knots,
+    PointLayout,
+    chain_segments,
+    grid_frames,
+    knot_frames,
+    local_frame,
+    segment_knot_frames,
+)
 from ._loads import Gravity, PointForce, PointMass, PointMoment
-from ._robot import Robot
-from ._rotation import matvec3
+from ._robot import Robot, concrete
+from ._rotation import matmul3, matvec3
 from ._strain import StrainModel
 from ._tendons import Tendon, TendonRouting, tendon_energy, tendon_tensions
 
@@ -76,6 +85,87 @@ def _count(owner: str, value) -> int:
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
         raise TypeError(f"{owner} must be an integer, got {value!r}")
     return int(value)
+
+
+class _PointSet:
+    """The points ``(segment, s)`` that one energy evaluation needs.
+
+    Points with a concrete ``s`` become knots; a point whose ``s`` is traced (a load site that is
+    a scene parameter) is integrated on its own. ``add``/``add_static`` return where the point's
+    frame will be in the output of :meth:`evaluate` (static indices: slices, not gathers).
+    """
+
+    def __init__(self, n_segments: int):
+        self.n_segments = n_segments
+        self.segs: list[int] = []
+        self.s: list[float] = []
+        self.traced: list[tuple[int, jax.Array]] = []
+
+    def __bool__(self):
+        return bool(self.segs or self.traced)
+
+    def add_static(self, segs, s) -> slice:
+        start = len(self.segs)
+        self.segs += [int(k) for k in np.asarray(segs).reshape(-1)]
+        self.s += [float(v) for v in np.asarray(s, float).reshape(-1)]
+        return slice(start, len(self.segs))
+
+    def add(self, segment: int, s) -> int | tuple:
+        value = None if isinstance(s, jax.core.Tracer) else concrete(s)
+        if value is not None:
+            return self.add_static([segment], [float(value)]).start
+        self.traced.append((segment, s))
+        return ("traced", len(self.traced) - 1)
+
+    def evaluate(self, scene: "Scene", q, weight: bool = False):
+        """Frames at the points, and with ``weight`` the first mass moment of the body."""
+        rot, pos, body = scene._frames_mixed(
+            q, np.asarray(self.segs, np.int64), np.asarray(self.s, float), self.traced, weight
+        )
+        return _Indexed(rot, len(self.segs)), _Indexed(pos, len(self.segs)), body
+
+
+class _Indexed:
+    """Frames indexed by what :class:`_PointSet` handed out (traced points come last)."""
+
+    def __init__(self, values, n_static: int):
+        self.values = values
+        self.n_static = n_static
+
+    def __getitem__(self, index):
+        if isinstance(index, tuple):
+            return self.values[self.n_static + index[1]]
+        return self.values[index]
+
+
+class _EnergyPlan:
+    """What the load part of one energy evaluation needs: points, knots and term layout."""
+
+    def __init__(self, scene: "Scene"):
+        self.gravity = scene.gravity
+        self.points = _PointSet(scene.n_segments)
+        self.point_masses = scene._of(PointMass) if self.gravity is not None else []
+        self.forces = scene._of(PointForce, follower=False)
+        self.mass_ids = [self.points.add(pm.segment, pm.s) for pm in self.point_masses]
+        self.routing = TendonRouting(scene.tendons) if scene.tendons else None
+        if self.routing is not None:
+            self.guide_ids = self.points.add_static(
+                self.routing.point_segment, self.routing.point_s
+            )
+        self.force_ids = [self.points.add(f.segment, f.s) for f in self.forces]
+        self.knots = Knots(
+            scene.n_segments,
+            np.asarray(self.points.segs, np.int64),
+            np.asarray(self.points.s, float),
+            scene.kinematics.min_intervals,
+        )
+        self._robot = scene.robot
+
+    def node_mass(self, dtype):
+        """Mass beyond each position node (weights of the by-parts weight), or None."""
+        if self.gravity is None:
+            return None
+        return mass_beyond(self._robot, self.knots.node_s, dtype)
 
 
 class Scene(eqx.Module):
@@ -237,10 +327,16 @@ class Scene(eqx.Module):
     def frames(self, q, segment, s):
         """World rotations (p, 3, 3) and positions (p, 3) at points ``(segment[k], s[k])``.
 
-        ``segment`` must be concrete (Python ints or a numpy array); ``s`` may be traced.
+        ``segment`` must be concrete (Python ints or a numpy array); ``s`` may be traced. Points
+        whose ``s`` is concrete take the knot path of :mod:`pacjax._kinematics`.
         """
         q = jnp.asarray(q)
-        layout = PointLayout(self.n_segments, np.asarray(segment).reshape(-1))
+        segment = np.asarray(segment).reshape(-1)
+        s_value = None if isinstance(s, jax.core.Tracer) else concrete(s)
+        if s_value is not None:
+            rot, pos, _ = self._knot_frames(q, segment, np.broadcast_to(s_value, segment.shape))
+            return rot, pos
+        layout = PointLayout(self.n_segments, segment)
         rot, pos = grid_frames(
             self.model,
             self.coordinates(q),
@@ -251,6 +347,49 @@ class Scene(eqx.Module):
             self.kinematics,
         )
         return layout.select(rot), layout.select(pos)
+
+    def _knot_frames(self, q, segment: np.ndarray, s: np.ndarray, weight: bool = False):
+        """Frames at points with concrete ``s``; the world frames of the segment bases; with
+        ``weight``, the weight of the body (J, a function of the gravity vector)."""
+        knots = Knots(self.n_segments, segment, s, self.kinematics.min_intervals)
+        node_mass = mass_beyond(self.robot, knots.node_s, q.dtype) if weight else None
+        rot, pos, (base_rot, base_pos, moment) = knot_frames(
+            self.model,
+            self.coordinates(q),
+            self.robot.stacked("length").astype(q.dtype),
+            self.robot.base_rotation,
+            self.robot.base_position,
+            knots,
+            node_mass,
+        )
+        body = None
+        if weight:
+            total = mass_beyond(self.robot, np.zeros(self.n_segments), q.dtype)
+            # sum_i int rho A L p ds: the first mass moment of the body (kg m).
+            body = jnp.sum(total[:, None] * base_pos + moment, axis=0)
+        return knots.select(rot), knots.select(pos), (base_rot, base_pos, body)
+
+    def _frames_mixed(self, q, segment: np.ndarray, s: np.ndarray, traced: list, weight=False):
+        """Frames at points with concrete ``s`` (knot path) and at a few ``(segment, s)`` with
+        traced ``s``, integrated from the base frame of their segment; and, with ``weight``, the
+        first mass moment of the body (kg m)."""
+        rot, pos, (base_rot, base_pos, body) = self._knot_frames(q, segment, s, weight)
+        if not traced:
+            return rot, pos, body
+        coords = self.coordinates(q)
+        lengths = self.robot.stacked("length").astype(q.dtype)
+        extra_rot, extra_pos = [], []
+        for k, s_k in traced:
+            r, p = local_frame(
+                self.model, coords[k], lengths[k], jnp.asarray(s_k, q.dtype), self.kinematics
+            )
+            extra_rot.append(matmul3(base_rot[k], r))
+            extra_pos.append(base_pos[k] + matvec3(base_rot[k], p))
+        return (
+            jnp.concatenate([rot, jnp.stack(extra_rot)]),
+            jnp.concatenate([pos, jnp.stack(extra_pos)]),
+            body,
+        )
 
     def tendon_lengths(self, q: Float[Array, " n_dofs"]) -> Float[Array, " m"]:
         """Length (m) of every tendon at configuration ``q``."""
@@ -276,51 +415,75 @@ class Scene(eqx.Module):
 
     def potential_energy(self, q: Float[Array, " n_dofs"], controls) -> Float[Array, ""]:
         """Potential energy ``V(q; theta, u)`` (J): elastic, gravity, tendons, world forces."""
-        dtype = q.dtype
         energy = self.elastic_energy(q)
-
-        # Every point the energy needs, evaluated in one batched kinematics call.
-        segs: list[int] = []
-        ss: list = []
-        gravity = self.gravity
-        masses = point_masses = routing = None
-        forces = self._of(PointForce, follower=False)
-        if gravity is not None:
-            g_segs, g_s, masses = gravity_masses(self.robot, self.quadrature_points, dtype)
-            segs += g_segs
-            ss.append(jnp.asarray(g_s, dtype))
-            point_masses = self._of(PointMass)
-            segs += [pm.segment for pm in point_masses]
-            ss += [pm.s.astype(dtype)[None] for pm in point_masses]
-        if self.tendons:
-            routing = TendonRouting(self.tendons)
-            tendon_start = len(segs)
-            segs += routing.point_segment.tolist()
-            ss.append(jnp.asarray(routing.point_s, dtype))
-        force_start = len(segs)
-        segs += [f.segment for f in forces]
-        ss += [f.s.astype(dtype)[None] for f in forces]
-        if not segs:
+        plan = self._energy_plan()
+        if plan is None:
             return energy
+        local = self._local_kinematics(self.coordinates(q), plan)
+        return energy + self._load_energy(local, controls, plan)
 
-        rot, pos = self.frames(q, np.asarray(segs), jnp.concatenate(ss))
-        if gravity is not None:
-            accel = gravity.acceleration.astype(dtype)
-            if point_masses:
-                masses = jnp.concatenate(
-                    [masses, jnp.stack([pm.mass for pm in point_masses]).astype(dtype)]
-                )
-            energy = energy - jnp.sum(masses * (pos[: len(masses)] @ accel))
-        if routing is not None:
-            sl = slice(tendon_start, tendon_start + len(routing.point_s))
-            offsets = routing.local_offsets(self.tendons, dtype)
-            points = pos[sl] + matvec3(rot[sl], offsets)
-            lengths = routing.lengths(points)
+    # The energy is E_el(q) + Psi(L_0(q_0), ..., L_n-1(q_n-1)): each segment's local kinematics
+    # L_i (frames at its knots in its own base frame) depends on its own coordinates only, and
+    # Psi (chaining, tendons, weight, loads) is cheap. _hessian.py uses this structure.
+    def _energy_plan(self) -> "_EnergyPlan | None":
+        """The points and terms the load part of the energy needs (None: elastic only)."""
+        plan = _EnergyPlan(self)
+        return plan if plan.points or plan.gravity is not None else None
+
+    def _local_kinematics(self, coords: Float[Array, "n d"], plan: "_EnergyPlan"):
+        """Per-segment local frames at the knots, and the local frames of traced load sites."""
+        dtype = coords.dtype
+        lengths = self.robot.stacked("length").astype(dtype)
+        grid = jnp.asarray(plan.knots.s, dtype)
+        weights = plan.node_mass(dtype)
+        segments = jax.vmap(lambda qi, li, ki, wi: segment_knot_frames(self.model, qi, li, ki, wi))(
+            coords, lengths, grid, weights
+        )
+        traced = tuple(self._traced_local(coords[k], k, s_k) for k, s_k in plan.points.traced)
+        return segments, traced
+
+    def _traced_local(self, qk, k: int, s_k):
+        length = self.robot.segments[k].length.astype(qk.dtype)
+        return local_frame(self.model, qk, length, jnp.asarray(s_k, qk.dtype), self.kinematics)
+
+    def _load_energy(self, local, controls, plan: "_EnergyPlan") -> Float[Array, ""]:
+        """``Psi``: gravity, tendon and world-force energy (J) from the local kinematics."""
+        (rot, pos, moment), traced = local
+        dtype = rot.dtype
+        base_rot, base_pos = chain_segments(
+            rot[:, -1], pos[:, -1], self.robot.base_rotation, self.robot.base_position
+        )
+        world_rot = plan.knots.select(matmul3(base_rot[:, None], rot))
+        world_pos = plan.knots.select(base_pos[:, None, :] + matvec3(base_rot[:, None], pos))
+        if traced:
+            sites = [k for k, _ in plan.points.traced]
+            extra_rot = [matmul3(base_rot[k], r) for k, (r, _) in zip(sites, traced, strict=True)]
+            extra_pos = [
+                base_pos[k] + matvec3(base_rot[k], p)
+                for k, (_, p) in zip(sites, traced, strict=True)
+            ]
+            world_rot = jnp.concatenate([world_rot, jnp.stack(extra_rot)])
+            world_pos = jnp.concatenate([world_pos, jnp.stack(extra_pos)])
+        rot_at = _Indexed(world_rot, len(plan.points.segs))
+        pos_at = _Indexed(world_pos, len(plan.points.segs))
+        energy = jnp.zeros((), dtype)
+        if plan.gravity is not None:
+            accel = plan.gravity.acceleration.astype(dtype)
+            total = mass_beyond(self.robot, np.zeros(self.n_segments), dtype)
+            # The body's first mass moment sum_i int rho A L p ds (kg m), by parts.
+            body = jnp.sum(total[:, None] * base_pos + matvec3(base_rot, moment), axis=0)
+            energy = energy - body @ accel
+            for pm, k in zip(plan.point_masses, plan.mass_ids, strict=True):
+                energy = energy - pm.mass.astype(dtype) * (pos_at[k] @ accel)
+        if plan.routing is not None:
+            routing = plan.routing
+            sl = plan.guide_ids
+            guides = pos_at[sl] + matvec3(rot_at[sl], routing.local_offsets(self.tendons, dtype))
+            lengths = routing.lengths(guides)
             rest = routing.rest_lengths(self.tendons, self.robot.stacked("length").astype(dtype))
             energy = energy + tendon_energy(self.tendons, lengths, rest, controls)
-        if forces:
-            f = jnp.stack([x.force for x in forces]).astype(dtype)
-            energy = energy - jnp.sum(f * pos[force_start:])
+        for f, k in zip(plan.forces, plan.force_ids, strict=True):
+            energy = energy - jnp.sum(f.force.astype(dtype) * pos_at[k])
         return energy
 
     def nonconservative_forces(self, q: Float[Array, " n_dofs"]) -> Float[Array, " n_dofs"] | None:

@@ -265,19 +265,20 @@ def test_polynomial_twist_matches_fine_integration_and_magnus_converges():
         np.asarray(x) for x in _poly_reference_tip(jnp.asarray(POLY_Q), 2, True, 4000)
     )
     errors = {}
-    for substeps in (4, 8):
+    for substeps in (8, 16):
         scene = pj.Scene(_robot(), model, rotation_substeps=substeps, quadrature_points=12)
         pos, rot = tip_pose(scene, jnp.asarray(POLY_Q))
         errors[substeps] = max(
             np.abs(np.asarray(pos) - ref_pos).max() / LENGTH,
             np.abs(np.asarray(rot) - ref_rot).max(),
         )
-    # Fourth-order Magnus: halving the sub-step divides the error by ~16 (measured: 15.9;
-    # 1.8e-5 and 1.1e-6 relative on this strongly turning and twisting strain; 2.8e-4 with 2).
-    assert errors[8] < errors[4] / 12, errors
+    # Fourth-order Magnus on the knot intervals (at most 1 / max(8, rotation_substeps) long):
+    # halving them divides the error by ~16 (measured 1.1e-6 relative with 8 intervals on this
+    # strongly turning and twisting strain).
+    assert errors[16] < errors[8] / 12, errors
     assert errors[8] < 2e-6, errors
-    # The model's default is 4 sub-steps.
-    assert pj.Scene(_robot(), model).kinematics.rotation_substeps == 4
+    # By default every segment is cut into at least 8 intervals.
+    assert pj.Scene(_robot(), model).kinematics.min_intervals == 8
 
 
 def test_polynomial_planar_matches_pac_and_is_exact_in_one_step():
