@@ -72,10 +72,19 @@ def iter_batch(
     Memory stays bounded by the chunk size whatever the batch size: write each chunk out and
     drop it. Arguments as :func:`solve_batch`.
     """
+    if not isinstance(scene, Scene):
+        raise TypeError(f"scene must be a pacjax.Scene, got {type(scene).__name__}")
+    if isinstance(chunk_size, bool) or not isinstance(chunk_size, (int, np.integer)):
+        raise TypeError(f"chunk_size must be an integer, got {chunk_size!r}")
+    if chunk_size < 1:
+        raise ValueError(f"chunk_size must be >= 1, got {chunk_size}")
     opts = SolverOptions(**options)
     dtype = solver_dtype(scene)
     scene = as_traced_leaves(scene, dtype)
-    controls_batch = np.asarray(controls_batch, dtype=float)
+    try:
+        controls_batch = np.asarray(controls_batch, dtype=float)
+    except (TypeError, ValueError):
+        raise TypeError("controls_batch must be an array of real numbers") from None
     if controls_batch.ndim != 2:
         raise ValueError(
             f"controls_batch must have shape (batch, {scene.n_tendons}), got {controls_batch.shape}"

@@ -71,12 +71,24 @@ class SolverOptions(eqx.Module):
             raise ValueError(f"hessian must be 'structured' or 'autodiff', got {self.hessian!r}")
         if self.method not in ("ptc", "flow"):
             raise ValueError(f"method must be 'ptc' or 'flow', got {self.method!r}")
-        if not self.tol > 0:
-            raise ValueError(f"tol must be > 0, got {self.tol}")
+        for name in ("max_steps", "escapes"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+                raise TypeError(f"{name} must be an integer, got {value!r}")
+        for name in ("tol", "initial_dt", "max_dt", "escape_size", "stability_tol"):
+            value = getattr(self, name)
+            if value is None and name == "stability_tol":
+                continue
+            if isinstance(value, bool) or not isinstance(value, (int, float, np.floating)):
+                raise TypeError(f"{name} must be a number, got {value!r}")
+            if not (np.isfinite(value) and value > 0):
+                raise ValueError(f"{name} must be finite and > 0, got {value}")
         if self.max_steps < 1:
             raise ValueError(f"max_steps must be >= 1, got {self.max_steps}")
         if self.escapes < 0:
             raise ValueError(f"escapes must be >= 0, got {self.escapes}")
+        if not isinstance(self.flow_solver, diffrax.AbstractSolver):
+            raise TypeError(f"flow_solver must be a diffrax solver, got {self.flow_solver!r}")
 
 
 class _Scaled(eqx.Module):
@@ -210,7 +222,12 @@ def check_controls(scene: Scene, controls, dtype, batched: bool = False) -> jax.
     """
     if controls is None:
         return scene.default_controls(dtype)
-    arr = np.asarray(controls, dtype=float) if not isinstance(controls, jax.core.Tracer) else None
+    arr = None
+    if not isinstance(controls, jax.core.Tracer):
+        try:
+            arr = np.asarray(controls, dtype=float)
+        except (TypeError, ValueError):
+            raise TypeError(f"controls must be real numbers, got {controls!r}") from None
     shape = arr.shape if arr is not None else jnp.shape(controls)
     want = ("batch", scene.n_tendons) if batched else (scene.n_tendons,)
     if len(shape) != len(want) or shape[-1] != scene.n_tendons:
@@ -234,6 +251,11 @@ def check_controls(scene: Scene, controls, dtype, batched: bool = False) -> jax.
 def check_q(scene: Scene, q, dtype) -> jax.Array:
     if q is None:
         return scene.zeros(dtype)
+    if not isinstance(q, jax.core.Tracer):
+        try:
+            q = np.asarray(q, dtype=float)
+        except (TypeError, ValueError):
+            raise TypeError(f"q0 must be an array of real numbers, got {q!r}") from None
     shape = np.shape(q) if not isinstance(q, jax.core.Tracer) else jnp.shape(q)
     if shape != (scene.n_dofs,):
         raise ValueError(f"q0 must have shape ({scene.n_dofs},), got {shape}")

@@ -325,7 +325,7 @@ def test_solver_options_and_scene_type():
     with pytest.raises(ValueError, match="method must be 'ptc' or 'flow'"):
         pj.solve_equilibrium(scene, method="newton")
     for tol in (0.0, -1.0, NAN):
-        with pytest.raises(ValueError, match="tol must be > 0"):
+        with pytest.raises(ValueError, match="tol must be finite and > 0"):
             pj.solve_equilibrium(scene, tol=tol)
     with pytest.raises(ValueError, match="max_steps"):
         pj.solve_equilibrium(scene, max_steps=0)
@@ -491,3 +491,37 @@ def test_batch_inputs():
         pj.solve_batch(scene, np.zeros((2, 2)), params=np.zeros(2))
     with pytest.raises(ValueError, match="leading axis of 2"):
         pj.solve_batch(scene, np.zeros((2, 2)), params=np.zeros(3), update=lambda s, p: s)
+
+
+# ------------------------------------------------------------------ solver options and batch
+@pytest.mark.parametrize(
+    "options, match",
+    [
+        ({"max_steps": 2.5}, "max_steps must be an integer"),
+        ({"escapes": True}, "escapes must be an integer"),
+        ({"initial_dt": 0.0}, "initial_dt must be finite and > 0"),
+        ({"max_dt": float("nan")}, "max_dt must be finite and > 0"),
+        ({"escape_size": -0.1}, "escape_size must be finite and > 0"),
+        ({"stability_tol": float("inf")}, "stability_tol must be finite and > 0"),
+        ({"tol": "small"}, "tol must be a number"),
+        ({"flow_solver": "Kvaerno5"}, "flow_solver must be a diffrax solver"),
+        ({"hessian": "exact"}, "hessian must be 'structured' or 'autodiff'"),
+    ],
+)
+def test_solver_options_are_checked(options, match):
+    with pytest.raises((TypeError, ValueError), match=match):
+        pj.SolverOptions(**options)
+
+
+def test_batch_arguments_are_checked():
+    scene = _scene()
+    with pytest.raises(TypeError, match="scene must be a pacjax.Scene"):
+        pj.solve_batch("scene.toml", np.zeros((2, 2)))
+    with pytest.raises(ValueError, match="chunk_size must be >= 1"):
+        pj.solve_batch(scene, np.zeros((2, 2)), chunk_size=0)
+    with pytest.raises(TypeError, match="controls_batch must be an array of real numbers"):
+        pj.solve_batch(scene, [["a", "b"], ["c", "d"]])
+    with pytest.raises(TypeError, match="controls must be real numbers"):
+        pj.solve_equilibrium(scene, ["a", "b"])
+    with pytest.raises(TypeError, match="q0 must be an array of real numbers"):
+        pj.solve_equilibrium(scene, [0.0, 0.0], q0=["x"] * 6)
