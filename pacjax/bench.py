@@ -54,7 +54,7 @@ def machine_info() -> dict:
         "processor": platform.processor() or platform.machine(),
         "python": platform.python_version(),
         "jax": jax.__version__,
-        "jaxlib": getattr(jax.lib, "__version__", None) or _version("jaxlib"),
+        "jaxlib": _version("jaxlib"),
         "pacjax": pj.__version__,
         "cpu_count": os.cpu_count(),
         "backend": jax.default_backend(),
@@ -366,7 +366,7 @@ def to_markdown(record: dict) -> str:
     """The record as Markdown tables."""
     m = record["machine"]
     lines = [
-        "# pacjax bench: equilibria of the paper's robot (stella2023, 200 g payload)",
+        f"# pacjax bench: equilibria of {record['config']['scene']}",
         "",
         f"{m['processor']}, {m['cpu_count']} CPUs, {m['backend']} ({', '.join(m['devices'])}), "
         f"jax {m['jax']}, {m['platform']}"
