@@ -117,6 +117,7 @@ def test_cantilever_first_frequency_matches_euler_bernoulli():
 
 
 @pytest.mark.slow  # compiles second and third derivatives of the kinematics
+@pytest.mark.expensive  # not yet seen to finish on 2 cores
 def test_damped_motion_settles_on_equilibrium():
     eq = pj.solve_equilibrium(SCENE, CONTROLS, tol=1e-12)
     assert bool(eq.converged)
@@ -169,6 +170,7 @@ def _free_scene():
 
 
 @pytest.mark.slow
+@pytest.mark.expensive  # not yet seen to finish on 2 cores
 def test_energy_is_conserved_over_100_periods():
     scene = _free_scene()
     period = 1.0 / float(dyn.natural_frequencies(scene)[0])
@@ -193,6 +195,7 @@ def test_energy_is_conserved_over_100_periods():
 
 
 @pytest.mark.slow
+@pytest.mark.expensive  # not yet seen to finish on 2 cores
 def test_energy_is_conserved_by_the_default_implicit_solver():
     """Kvaerno5 (the default) with tendons as undamped springs: 100 periods."""
     period = 1.0 / float(dyn.natural_frequencies(SCENE, controls=CONTROLS)[0])
@@ -215,6 +218,7 @@ def test_energy_is_conserved_by_the_default_implicit_solver():
 
 
 @pytest.mark.slow
+@pytest.mark.expensive  # not yet seen to finish on 2 cores
 def test_gradient_with_respect_to_damping_matches_finite_differences():
     q0 = jnp.zeros(SCENE.n_dofs).at[0].set(0.2)
 
@@ -240,6 +244,7 @@ def test_gradient_with_respect_to_damping_matches_finite_differences():
 
 
 @pytest.mark.slow
+@pytest.mark.expensive  # not yet seen to finish on 2 cores
 def test_cantilever_free_vibration_frequency():
     """Simulated free vibration of the high-order cantilever: zero crossings give the
     Euler-Bernoulli frequency."""

@@ -20,6 +20,10 @@ from hypothesis import strategies as st
 
 import pacjax as pj
 
+# The whole file runs in CI's slow step:
+# extreme cases in two precisions: minutes of compilation on 2 cores.
+pytestmark = pytest.mark.slow
+
 SEG_LENGTH = 0.1
 EI = 0.01  # N m^2
 OFFSET = 0.01  # m

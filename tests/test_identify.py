@@ -21,6 +21,10 @@ from pacjax.cli import cli
 from pacjax.mocapfile import save_mocap
 from pacjax.scenefile import save_scene
 
+# The whole file runs in CI's slow step:
+# fits compile batched solves and their Jacobians: minutes on 2 cores.
+pytestmark = pytest.mark.slow
+
 TRUE_EI = 0.02
 N_FRAMES = 16
 

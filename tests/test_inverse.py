@@ -18,6 +18,10 @@ import pytest
 import pacjax as pj
 from pacjax import inverse
 
+# The whole file runs in CI's slow step:
+# least-squares through equilibria: minutes of compilation on 2 cores.
+pytestmark = pytest.mark.slow
+
 ANGLES = (np.pi / 2, np.pi / 2 + 2 * np.pi / 3, np.pi / 2 + 4 * np.pi / 3)
 TIP_MASS = 0.05
 
@@ -191,6 +195,7 @@ def test_bad_scene_and_batch_input():
 
 
 @pytest.mark.slow
+@pytest.mark.expensive  # not yet seen to finish on 2 cores
 def test_pose_target(targets):
     commands, _ = targets
     eq = pj.solve_equilibrium(SCENE, commands[2])
@@ -202,6 +207,7 @@ def test_pose_target(targets):
 
 
 @pytest.mark.slow
+@pytest.mark.expensive  # not yet seen to finish on 2 cores
 def test_marker_targets(targets):
     commands, _ = targets
     sites = [(0, 1.0), (1, 0.5), (1, 1.0)]
@@ -215,6 +221,7 @@ def test_marker_targets(targets):
 
 
 @pytest.mark.slow
+@pytest.mark.expensive  # not yet seen to finish on 2 cores
 def test_batch_matches_single_and_tension_limit(targets):
     _, points = targets
     batch = np.concatenate([points, [[0.0, 0.05, -0.5]]])

@@ -12,6 +12,10 @@ import pytest
 
 import pacjax as pj
 
+# The whole file runs in CI's slow step:
+# several-start batches: minutes of compilation on 2 cores.
+pytestmark = pytest.mark.slow
+
 EI = 0.05
 LENGTH = 0.4
 G = 9.81
