@@ -19,6 +19,7 @@ from ._tendons import Tendon as Tendon
 
 __version__ = "0.1.0"
 from . import dynamics as dynamics
+from . import inverse as inverse
 from . import presets as presets
 from ._api import astype as astype
 from ._api import backbone as backbone
@@ -28,20 +29,19 @@ from ._api import tip_pose as tip_pose
 from ._batch import iter_batch as iter_batch
 from ._batch import solve_batch as solve_batch
 from ._equilibrium import SolverOptions as SolverOptions
+from ._equilibrium import solve_equilibrium as solve_equilibrium
+from ._fitreport import IdentificationReport as IdentificationReport
+from ._identify import identify as identify
+from ._mocap import MocapDataset as MocapDataset
+from ._mocap import static_frames as static_frames
 from ._multistart import Equilibria as Equilibria
 from ._multistart import find_equilibria as find_equilibria
-from ._equilibrium import solve_equilibrium as solve_equilibrium
 from ._solution import Equilibrium as Equilibrium
+from ._synthetic import high_fidelity as high_fidelity
+from ._synthetic import synthetic_mocap as synthetic_mocap
 from .dynamics import Damping as Damping
 from .dynamics import Trajectory as Trajectory
 from .dynamics import simulate as simulate
-from ._identify import identify as identify
-from ._fitreport import IdentificationReport as IdentificationReport
-from ._mocap import MocapDataset as MocapDataset
-from ._mocap import static_frames as static_frames
-from ._synthetic import high_fidelity as high_fidelity
-from ._synthetic import synthetic_mocap as synthetic_mocap
-from . import inverse as inverse
 from .inverse import InverseResult as InverseResult
 from .inverse import Tracking as Tracking
 from .inverse import Workspace as Workspace

@@ -2,9 +2,10 @@
 
 Each chunk is one compiled, ``vmap``-ed call of the same solver as :func:`solve_equilibrium`, so
 results agree with single solves to solver tolerance. Chunks have a fixed size (the last one is
-padded), so a batch of any length compiles once. With several devices (``jax.devices()``), every
-chunk is sharded along the batch axis with ``jax.sharding`` and XLA runs the shards in parallel;
-in a multi-host run (``jax.distributed.initialize()``), each process solves the rows it owns.
+padded), so a batch of any length compiles once. With several devices (``jax.local_devices()``),
+every chunk is sharded along the batch axis with ``jax.sharding`` and XLA runs the shards in
+parallel. In a multi-host run (``jax.distributed.initialize()``) each process passes the rows
+it owns and shards them over its own devices; see docs/multihost.md.
 """
 
 import dataclasses
@@ -50,7 +51,7 @@ def _nearest_rows(done_controls: np.ndarray, controls: np.ndarray) -> np.ndarray
 def _sharding(n_devices: int):
     if n_devices <= 1:
         return None
-    mesh = Mesh(np.asarray(jax.devices()[:n_devices]), ("batch",))
+    mesh = Mesh(np.asarray(jax.local_devices()[:n_devices]), ("batch",))
     return NamedSharding(mesh, PartitionSpec("batch"))
 
 
@@ -109,9 +110,9 @@ def iter_batch(
         lengths = {x.shape[0] for x in jtu.tree_leaves(params)}
         if lengths != {n}:
             raise ValueError(f"every leaf of params needs a leading axis of {n}, got {lengths}")
-    n_devices = len(jax.devices()) if devices is None else devices
-    if not 1 <= n_devices <= len(jax.devices()):
-        raise ValueError(f"devices must be in 1..{len(jax.devices())}, got {devices}")
+    n_devices = len(jax.local_devices()) if devices is None else devices
+    if not 1 <= n_devices <= len(jax.local_devices()):
+        raise ValueError(f"devices must be in 1..{len(jax.local_devices())}, got {devices}")
     chunk = max(1, min(chunk_size, n))
     chunk = -(-chunk // n_devices) * n_devices  # a multiple of the device count
     sharding = _sharding(n_devices)
