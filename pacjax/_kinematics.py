@@ -125,14 +125,7 @@ def grid_frames(
         return jax.vmap(lambda sk: local_frame(model, qi, li, sk, config))(si)
 
     rot, pos = jax.vmap(segment)(q, lengths, s_all)
-
-    def chain(carry, end):
-        r, p = carry
-        d_rot, d_pos = end
-        return (matmul3(r, d_rot), p + matvec3(r, d_pos)), (r, p)
-
-    start = (base_rotation.astype(q.dtype), base_position.astype(q.dtype))
-    _, (base_rots, base_pos) = jax.lax.scan(chain, start, (rot[:, -1], pos[:, -1]))
+    base_rots, base_pos = chain_segments(rot[:, -1], pos[:, -1], base_rotation, base_position)
     world_rot = matmul3(base_rots[:, None], rot[:, :-1])
     world_pos = base_pos[:, None, :] + matvec3(base_rots[:, None], pos[:, :-1])
     return world_rot, world_pos
