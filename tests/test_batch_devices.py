@@ -11,6 +11,7 @@ import subprocess
 import sys
 
 import numpy as np
+import pytest
 
 CODE = r"""
 import json, os
@@ -46,6 +47,7 @@ print(json.dumps({
 """
 
 
+@pytest.mark.slow  # over a minute of compilation: CI's slow step
 def test_solve_batch_on_two_cpu_devices_matches_one_device():
     env = dict(os.environ)
     env["XLA_FLAGS"] = env.get("XLA_FLAGS", "") + " --xla_force_host_platform_device_count=2"

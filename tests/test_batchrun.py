@@ -305,6 +305,7 @@ def test_bench_rejects_bad_options(scene_file, tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.expensive  # 17 min on a loaded 2-core machine
 def test_bench_baseline_gradient_and_float32(scene_file, tmp_path):
     record, md, _ = _bench(
         scene_file, tmp_path, "--batch", "2", "--baseline-batch", 2, "--grad-batch", 2

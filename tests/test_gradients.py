@@ -144,6 +144,7 @@ def _relative_error(a, b):
     return np.abs(a - b).max() / np.abs(b).max()
 
 
+@pytest.mark.slow  # over a minute of compilation: CI's slow step
 def test_grad_of_tip_loss_matches_finite_differences(reference):
     eq, _, fd_loss = reference
     grad = jax.grad(_tip_loss)(BASE_PARAMS, BASE.zeros())
@@ -178,6 +179,7 @@ def test_jacfwd_of_equilibrium_matches_finite_differences(reference):
     assert max(errors.values()) < 1e-6, errors
 
 
+@pytest.mark.slow  # over a minute of compilation: CI's slow step
 def test_jit_vmap_agree_with_single_solves_and_compile_once(reference):
     eq, _, _ = reference
     controls = np.array([[0.012, 0.006], [0.0, 0.01], [0.02, 0.0], [0.005, 0.005]])

@@ -152,6 +152,7 @@ SLOW = settings(FAST, max_examples=40)
 
 @FAST
 @given(values=_values(2), seed=st.integers(0, 2**16))
+@pytest.mark.slow  # over a minute of compilation: CI's slow step
 def test_random_two_segment_pac_scenes(values, seed):
     scene, controls = _scene(pj.PAC(), 2, values)
     _check_equilibrium(scene, controls, seed)

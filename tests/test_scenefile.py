@@ -153,6 +153,7 @@ def test_documented_examples_parse():
 
 # ------------------------------------------------------------------------------ examples
 @pytest.mark.parametrize("path", EXAMPLES, ids=[p.stem for p in EXAMPLES])
+@pytest.mark.slow  # over a minute of compilation: CI's slow step
 def test_example_loads_and_solves(path):
     scene, controls, extra = load_scene(path)
     eq = pj.solve_equilibrium(scene, controls, **extra["solver"])
