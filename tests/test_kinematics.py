@@ -328,6 +328,7 @@ def test_two_polynomial_segments_chain_like_one_long_segment():
 
 
 @pytest.mark.slow
+@pytest.mark.expensive  # to restate: rotation_substeps < 8 no longer changes the knot path
 def test_two_twisted_polynomial_segments_chain_like_one_long_segment():
     """Turning plane and twist: equal up to the Magnus truncation, which vanishes at 4th order."""
     order = 2
@@ -511,6 +512,7 @@ def _batched_reference(fn):
 
 
 @pytest.mark.slow
+@pytest.mark.expensive  # to restate: rotation_substeps < 8 no longer changes the knot path
 def test_twist_bend_hessian_at_straight_converges_with_magnus_substeps():
     """The one inexact second derivative at q = 0 (bend-twist commutator) is Magnus truncation."""
     reference = DERIVATIVE_CASES["poly2-twist"][1]
