@@ -117,13 +117,6 @@ class _PointSet:
         self.traced.append((segment, s))
         return ("traced", len(self.traced) - 1)
 
-    def evaluate(self, scene: "Scene", q, weight: bool = False):
-        """Frames at the points, and with ``weight`` the first mass moment of the body."""
-        rot, pos, body = scene._frames_mixed(
-            q, np.asarray(self.segs, np.int64), np.asarray(self.s, float), self.traced, weight
-        )
-        return _Indexed(rot, len(self.segs)), _Indexed(pos, len(self.segs)), body
-
 
 class _Indexed:
     """Frames indexed by what :class:`_PointSet` handed out (traced points come last)."""
@@ -334,8 +327,7 @@ class Scene(eqx.Module):
         segment = np.asarray(segment).reshape(-1)
         s_value = None if isinstance(s, jax.core.Tracer) else concrete(s)
         if s_value is not None:
-            rot, pos, _ = self._knot_frames(q, segment, np.broadcast_to(s_value, segment.shape))
-            return rot, pos
+            return self._knot_frames(q, segment, np.broadcast_to(s_value, segment.shape))
         layout = PointLayout(self.n_segments, segment)
         rot, pos = grid_frames(
             self.model,
@@ -348,48 +340,18 @@ class Scene(eqx.Module):
         )
         return layout.select(rot), layout.select(pos)
 
-    def _knot_frames(self, q, segment: np.ndarray, s: np.ndarray, weight: bool = False):
-        """Frames at points with concrete ``s``; the world frames of the segment bases; with
-        ``weight``, the weight of the body (J, a function of the gravity vector)."""
+    def _knot_frames(self, q, segment: np.ndarray, s: np.ndarray):
+        """Frames at points with concrete ``s`` (the knot path of :mod:`pacjax._kinematics`)."""
         knots = Knots(self.n_segments, segment, s, self.kinematics.min_intervals)
-        node_mass = mass_beyond(self.robot, knots.node_s, q.dtype) if weight else None
-        rot, pos, (base_rot, base_pos, moment) = knot_frames(
+        rot, pos, _ = knot_frames(
             self.model,
             self.coordinates(q),
             self.robot.stacked("length").astype(q.dtype),
             self.robot.base_rotation,
             self.robot.base_position,
             knots,
-            node_mass,
         )
-        body = None
-        if weight:
-            total = mass_beyond(self.robot, np.zeros(self.n_segments), q.dtype)
-            # sum_i int rho A L p ds: the first mass moment of the body (kg m).
-            body = jnp.sum(total[:, None] * base_pos + moment, axis=0)
-        return knots.select(rot), knots.select(pos), (base_rot, base_pos, body)
-
-    def _frames_mixed(self, q, segment: np.ndarray, s: np.ndarray, traced: list, weight=False):
-        """Frames at points with concrete ``s`` (knot path) and at a few ``(segment, s)`` with
-        traced ``s``, integrated from the base frame of their segment; and, with ``weight``, the
-        first mass moment of the body (kg m)."""
-        rot, pos, (base_rot, base_pos, body) = self._knot_frames(q, segment, s, weight)
-        if not traced:
-            return rot, pos, body
-        coords = self.coordinates(q)
-        lengths = self.robot.stacked("length").astype(q.dtype)
-        extra_rot, extra_pos = [], []
-        for k, s_k in traced:
-            r, p = local_frame(
-                self.model, coords[k], lengths[k], jnp.asarray(s_k, q.dtype), self.kinematics
-            )
-            extra_rot.append(matmul3(base_rot[k], r))
-            extra_pos.append(base_pos[k] + matvec3(base_rot[k], p))
-        return (
-            jnp.concatenate([rot, jnp.stack(extra_rot)]),
-            jnp.concatenate([pos, jnp.stack(extra_pos)]),
-            body,
-        )
+        return knots.select(rot), knots.select(pos)
 
     def tendon_lengths(self, q: Float[Array, " n_dofs"]) -> Float[Array, " m"]:
         """Length (m) of every tendon at configuration ``q``."""
