@@ -44,7 +44,34 @@ def segment_elastic_energy(
     extra = model.coordinate_energy(q, segment.torsion_stiffness.astype(q.dtype) / length)
     if extra is not None:
         energy = energy + extra
-    return energy + 0.5 * segment.axial_stiffness.astype(q.dtype) * elongation**2
+    axial = segment.axial_stiffness.astype(q.dtype)
+    stop = contraction_stop_energy(elongation, segment.contraction_limit.astype(q.dtype), axial)
+    return energy + 0.5 * axial * elongation**2 + stop
+
+
+#: Width of the contraction stop's contact band, as a fraction of the contraction limit.
+STOP_BAND = 0.05
+
+
+def contraction_stop_energy(
+    elongation: Float[Array, ""], limit: Float[Array, ""], axial_stiffness: Float[Array, ""]
+) -> Float[Array, ""]:
+    """Energy (J) of a segment's end stop: zero until the contraction nears ``limit``.
+
+    With ``w = STOP_BAND * limit`` and the depth ``x = (-dL - (limit - w)) / w`` into the contact
+    band, the energy is ``k_a w^2 x^3 / (1 - x)`` for ``0 < x < 1``: it starts with zero value,
+    force and stiffness (twice differentiable, so Newton steps see no kink), then grows without
+    bound, ``+inf`` at and beyond the limit. No force, however large, contracts the segment past
+    ``limit``; a solver step that would is rejected (its energy is not finite), and the
+    equilibrium sits inside the band where the stop's force ``k_a w x^2 (3 - 2x) / (1 - x)^2``
+    balances the load.
+    """
+    width = STOP_BAND * limit
+    x = (-elongation - (limit - width)) / width
+    inside = (x > 0) & (x < 1)
+    xs = jnp.where(inside, x, 0.0)  # safe branch: exact zero value and derivatives outside
+    energy = axial_stiffness * width**2 * xs**3 / (1.0 - xs)
+    return jnp.where(x >= 1, jnp.inf, energy)
 
 
 def elastic_energy(

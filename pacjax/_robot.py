@@ -9,6 +9,8 @@ from jaxtyping import Array, Float
 
 # Poisson's ratio of an incompressible elastomer: GJ = EI / (1 + nu) for a solid round section.
 _POISSON_RATIO = 0.5
+#: Default contraction limit of a segment, as a fraction of its rest length.
+DEFAULT_CONTRACTION_LIMIT = 0.9
 
 
 def as_float(x, name: str = "parameter") -> Array:
@@ -118,6 +120,10 @@ class Segment(eqx.Module):
         radius_tip: radius (m) at the tip for a tapered segment; then ``EI(s)`` scales with
             ``r(s)^4`` and the density with ``r(s)^2``, ``r`` linear in ``s``. None: uniform.
         stiffening: a :class:`StiffeningLaw` for ``EI`` against contraction; None: constant.
+        contraction_limit: the largest contraction ``-dL`` (m) the segment can reach, ``0 <
+            contraction_limit < length``: a modelled end stop (the coils or rings touching),
+            see :func:`pacjax._energy.contraction_stop_energy`. None: 90 % of the length
+            (a segment never reaches zero length, where a tendon's length has no derivative).
     """
 
     length: Float[Array, ""] = eqx.field(converter=float_field("Segment.length"))
@@ -134,6 +140,9 @@ class Segment(eqx.Module):
     radius: Float[Array, ""] = eqx.field(converter=float_field("Segment.radius"), default=0.0)
     radius_tip: Float[Array, ""] | None = None
     stiffening: StiffeningLaw | None = None
+    contraction_limit: Float[Array, ""] = eqx.field(
+        converter=float_field("Segment.contraction_limit"), default=None
+    )
 
     def __init__(
         self,
@@ -145,6 +154,7 @@ class Segment(eqx.Module):
         radius=0.0,
         radius_tip=None,
         stiffening=None,
+        contraction_limit=None,
     ):
         self.length = length
         self.bending_stiffness = bending_stiffness
@@ -160,6 +170,9 @@ class Segment(eqx.Module):
             radius_tip = as_float(radius_tip, "Segment.radius_tip")
         self.radius_tip = radius_tip
         self.stiffening = stiffening
+        if contraction_limit is None:
+            contraction_limit = DEFAULT_CONTRACTION_LIMIT * as_float(length, "Segment.length")
+        self.contraction_limit = contraction_limit
 
     def __check_init__(self):
         for field in (
@@ -169,6 +182,7 @@ class Segment(eqx.Module):
             "torsion_stiffness",
             "linear_density",
             "radius",
+            "contraction_limit",
         ):
             check_scalar(f"Segment.{field}", getattr(self, field))
         if self.radius_tip is not None:
@@ -182,6 +196,13 @@ class Segment(eqx.Module):
         if self.radius_tip is not None:
             check_positive("Segment.radius_tip", self.radius_tip)
             check_positive("Segment.radius (needed by radius_tip)", self.radius)
+        check_positive("Segment.contraction_limit", self.contraction_limit)
+        limit, length = concrete(self.contraction_limit), concrete(self.length)
+        if limit is not None and length is not None and limit >= length:
+            raise ValueError(
+                f"Segment.contraction_limit must be below Segment.length ({float(length)} m), "
+                f"got {float(limit)} m: a segment cannot contract to zero length"
+            )
         if self.stiffening is not None and not isinstance(self.stiffening, StiffeningLaw):
             raise TypeError(f"Segment.stiffening must be a StiffeningLaw, got {self.stiffening!r}")
 

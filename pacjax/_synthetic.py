@@ -79,6 +79,7 @@ def high_fidelity(
                     radius=seg.radius_at(np.asarray(j / n)),
                     radius_tip=seg.radius_at(np.asarray((j + 1) / n)) if tapered else None,
                     stiffening=law,
+                    contraction_limit=seg.contraction_limit / n,
                 )
             )
     robot = Robot(segments, scene.robot.base_rotation, scene.robot.base_position)

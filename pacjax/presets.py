@@ -95,6 +95,7 @@ def stella2023(
         linear_density=LINEAR_DENSITY,
         radius=RADIUS,
         stiffening=law,
+        contraction_limit=CONTRACTION_RANGE,
     )
     robot = Robot([segment] * n_sections, base_rotation=MOUNTS[mount])
     tendons = [

@@ -33,6 +33,7 @@ before the first table, as TOML puts every later key into the table above it::
     radius = 0.03                # m (optional: 0)
     radius_tip = 0.02            # m, tapered segment (optional)
     stiffening = { type = "exponential", rate = 2.125 }   # EI grows with contraction (optional)
+    contraction_limit = 0.070    # m, end stop of the contraction (optional: 0.9 * length)
     repeat = 2                   # this many identical segments (optional: 1)
 
     [robot]
@@ -429,6 +430,7 @@ def _read_segments(top: _Table) -> list[Segment]:
             radius=t.number("radius", 0.0),
             radius_tip=t.number("radius_tip"),
             stiffening=_read_stiffening(t),
+            contraction_limit=t.number("contraction_limit"),
         )
         t.finish()
         segments += [t.build(Segment, **kwargs)] * repeat
@@ -642,6 +644,7 @@ def _segment_table(seg: Segment) -> dict:
         "torsion_stiffness": _scalar(seg.torsion_stiffness),
         "linear_density": _scalar(seg.linear_density),
         "radius": _scalar(seg.radius),
+        "contraction_limit": _scalar(seg.contraction_limit),
     }
     if seg.radius_tip is not None:
         out["radius_tip"] = _scalar(seg.radius_tip)
@@ -722,6 +725,7 @@ _UNITS = {
     "linear_density": "kg/m",
     "radius": "m",
     "radius_tip": "m",
+    "contraction_limit": "m",
     "base_position": "m",
     "offset": "m",
     "offset_end": "m",

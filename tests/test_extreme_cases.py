@@ -19,6 +19,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import pacjax as pj
+from pacjax._energy import STOP_BAND
 
 # The whole file runs in CI's slow step:
 # extreme cases in two precisions: minutes of compilation on 2 cores.
@@ -186,16 +187,25 @@ def test_extreme_case_converges_or_says_so(case, dtype):
         check(scene, eq, dtype)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="no modelled contraction stop: tendons pulled by more than their length drive the "
-    "segments to zero length, where the tendon length is not differentiable (max steps)",
-)
-def test_contraction_past_the_end_of_range_is_stopped():
-    _, eq, grad = _solve("float64", [0.25, 0.25])  # more than the 0.2 m robot
-    _assert_explicit(eq, grad, TOLS["float64"])
-    assert bool(eq.converged)
-    assert np.all(SEG_LENGTH + np.asarray(eq.q)[[2, 5]] > 0.0)
+@pytest.mark.parametrize("dtype", ["float64", "float32"])
+def test_contraction_past_the_end_of_range_is_stopped(dtype):
+    """Tendons pulled by more than the robot's length: each segment rests on its end stop.
+
+    EI 10x the default: with EI = 0.01 N m^2 the ~700 N in the two antagonistic tendons makes
+    the straight state unstable (their chords between the guide rings shorten as the body
+    bends), and the body folds up without an equilibrium short of self-contact.
+    """
+    scene, eq, grad = _solve(dtype, [0.25, 0.25], ei=10 * EI)  # more than the 0.2 m robot
+    _assert_explicit(eq, grad, TOLS[dtype])
+    # float32: the stop's force (~200 N here) cancels the tendons' to round-off, a scaled
+    # residual of ~3e-4 against the 1e-4 tolerance: flagged, never hidden.
+    if dtype == "float64":
+        assert bool(eq.converged), (eq.reason, float(eq.residual_norm))
+    limit = 0.9 * SEG_LENGTH  # the default contraction_limit
+    contraction = -np.asarray(eq.q, float)[[2, 5]]
+    assert np.all(contraction < limit)  # never past the stop
+    assert np.all(contraction > limit * (1 - STOP_BAND))  # inside its contact band
+    assert np.all(np.isfinite(np.asarray(grad)))
 
 
 def _set_values(scene, row):

@@ -47,7 +47,8 @@ def _scene(n_segments=2, model=None, tendons=None, loads=()):
 
 # ------------------------------------------------------------------------------ segments
 @pytest.mark.parametrize(
-    "field", ["length", "bending_stiffness", "axial_stiffness", "torsion_stiffness"]
+    "field",
+    ["length", "bending_stiffness", "axial_stiffness", "torsion_stiffness", "contraction_limit"],
 )
 @pytest.mark.parametrize("value", [-1.0, 0.0, NAN, INF, -INF])
 def test_segment_parameters_must_be_finite_and_positive(field, value):
@@ -61,6 +62,13 @@ def test_segment_density_and_radius_must_be_finite_and_non_negative(field, value
     with pytest.raises(ValueError, match=f"Segment.{field}"):
         _segment(**{field: value})
     _segment(**{field: 0.0})  # zero is allowed (massless, or a line body)
+
+
+def test_segment_contraction_limit_must_be_below_its_length():
+    with pytest.raises(ValueError, match="Segment.contraction_limit must be below Segment.length"):
+        _segment(contraction_limit=0.1)  # the length: zero length at the stop
+    assert float(_segment().contraction_limit) == pytest.approx(0.09)  # default: 90 %
+    assert float(_segment(contraction_limit=0.05).contraction_limit) == 0.05
 
 
 def test_tapered_segment_needs_a_positive_tip_radius_and_base_radius():

@@ -109,8 +109,16 @@ CASES = {
         2,
     ),
     "contract_past_end": (
-        "all four tendons pulled 0.25 m (more than the 0.2 m length): no modelled stop, "
-        "see min_length",
+        "all four tendons pulled 0.25 m (more than the 0.2 m length), EI 0.1 N m^2: each "
+        "segment rests on its contraction stop (default limit 0.09 m), see min L+dL",
+        dict(rotation=HANGING, ei=10 * EI),
+        [0.25, 0.25, 0.25, 0.25],
+        2,
+    ),
+    "contract_past_end_soft": (
+        "as contract_past_end with EI 0.01 N m^2: ~700 N per tendon against the stop makes the "
+        "straight state unstable (chords between rings shorten as the body bends); the body "
+        "folds up with no equilibrium short of self-contact, which the model does not have",
         dict(rotation=HANGING),
         [0.25, 0.25, 0.25, 0.25],
         2,
