@@ -125,10 +125,19 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
             gain = 1.0 / (jnp.abs(state.eigvals) + 1.0 / state.dt)
             newton = -(state.eigvecs @ (gain * rz)) / w
         else:
-            # Follower loads: J is not symmetric; shift it by enough to dominate the negative
-            # curvature of its symmetric part.
+            # Non-conservative loads (follower forces, dead moments in 3D): J is not symmetric.
+            # Far from a solution, shift it by enough to dominate the negative curvature of its
+            # symmetric part (a short stretch of the flow). That shift caps dt, so near a
+            # solution whose symmetric part is indefinite (a dead moment bending a twistable rod
+            # past ~2 rad) the capped steps creep; there the plain Newton step is tried first
+            # and taken when it halves the residual (one more residual evaluation per step).
             dt_safe = jnp.where(state.eig < 0, jnp.minimum(state.dt, 0.5 / -state.eig), state.dt)
-            newton = jnp.linalg.solve(state.jacobian + eye / dt_safe, -state.residual)
+            flow = jnp.linalg.solve(state.jacobian + eye / dt_safe, -state.residual)
+            full = jnp.linalg.solve(state.jacobian, -state.residual)
+            r_full, _ = fn(y + full, args)
+            halves = jnp.all(jnp.isfinite(full)) & jnp.all(jnp.isfinite(r_full))
+            halves = halves & (max_abs(r_full) <= 0.5 * max_abs(state.residual))
+            newton = jnp.where(halves & (state.eig < 0), full, flow)
         delta = jnp.where(first, 0.0, jnp.where(escape, state.escape_dy, newton))
 
         def acceptable(r, merit):

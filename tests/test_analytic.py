@@ -57,17 +57,8 @@ POLYNOMIAL_MODELS = [
     _slow("poly1", pj.PolynomialCurvature(1)),
     _slow("poly2", pj.PolynomialCurvature(2)),
     _slow("poly3", pj.PolynomialCurvature(3)),
-    # Same family as poly3-twist; not yet run after the solver changes of 2026-11-25.
-    pytest.param(
-        pj.PolynomialCurvature(1, twist=True),
-        id="poly1-twist",
-        marks=[pytest.mark.slow, pytest.mark.xfail(reason="see poly3-twist")],
-    ),
-    pytest.param(
-        pj.PolynomialCurvature(2, twist=True),
-        id="poly2-twist",
-        marks=[pytest.mark.slow, pytest.mark.xfail(reason="see poly3-twist")],
-    ),
+    _slow("poly1-twist", pj.PolynomialCurvature(1, twist=True)),
+    _slow("poly2-twist", pj.PolynomialCurvature(2, twist=True)),
 ]
 
 
@@ -123,11 +114,7 @@ def solve(scene, **kwargs):
 
 
 @pytest.mark.parametrize("model", PLANAR_MODELS + POLYNOMIAL_MODELS)
-def test_end_moment_gives_circular_arc(model, request):
-    if request.node.callspec.id == "poly3-twist":
-        # Known defect (session note of 2026-11-25): with a twist strain, continuation stalls
-        # at a scaled residual ~1e-4 (max steps) on one of the tip angles.
-        request.applymarker(pytest.mark.xfail(strict=True, reason="continuation stalls"))
+def test_end_moment_gives_circular_arc(model):
     axis = np.array([0.0, 1.0, 0.0])  # bends towards +x (the base frame's x axis)
     for tip_angle in TIP_ANGLES:
         moment = tip_angle * EI / LENGTH
