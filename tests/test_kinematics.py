@@ -328,9 +328,10 @@ def test_two_polynomial_segments_chain_like_one_long_segment():
 
 
 @pytest.mark.slow
-@pytest.mark.expensive  # to restate: rotation_substeps < 8 no longer changes the knot path
 def test_two_twisted_polynomial_segments_chain_like_one_long_segment():
-    """Turning plane and twist: equal up to the Magnus truncation, which vanishes at 4th order."""
+    """Turning plane and twist: two half segments chain into the long one. With the same Magnus
+    intervals (one segment cut into 2n, two into n each) the two are equal to round-off; with
+    coarser intervals on the halves they differ by the Magnus truncation, at 4th order."""
     order = 2
     dl = 0.012
     coeffs = POLY_Q[:-1].reshape(3, order + 1)  # rows kx, ky, tw
@@ -344,17 +345,18 @@ def test_two_twisted_polynomial_segments_chain_like_one_long_segment():
         ]
     )
     q_one = np.concatenate([POLY_Q[:-1], [dl]])
-    gaps = {}
-    for substeps in (1, 4):
-        model = pj.PolynomialCurvature(order=order, twist=True)
-        one = pj.Scene(_robot(1, LENGTH), model, rotation_substeps=2 * substeps)
-        two = pj.Scene(_robot(2, LENGTH / 2), model, rotation_substeps=substeps)
+    model = pj.PolynomialCurvature(order=order, twist=True)
+
+    def gap(substeps_one, substeps_two):
+        one = pj.Scene(_robot(1, LENGTH), model, rotation_substeps=substeps_one)
+        two = pj.Scene(_robot(2, LENGTH / 2), model, rotation_substeps=substeps_two)
         p1, r1 = tip_pose(one, jnp.asarray(q_one))
         p2, r2 = tip_pose(two, jnp.asarray(q_two))
-        gaps[substeps] = max(np.abs(p1 - p2).max() / LENGTH, np.abs(r1 - r2).max())
-    # Measured: 6.6e-5 and 2.6e-7 (ratio 253 ~ 4^4).
-    assert gaps[4] < gaps[1] / 150, gaps
-    assert gaps[4] < 1e-6, gaps
+        return max(np.abs(p1 - p2).max() / LENGTH, np.abs(r1 - r2).max())
+
+    assert gap(16, 8) < 1e-13  # the same 16 intervals of L / 16
+    coarse, fine = gap(64, 8), gap(64, 16)  # halves cut in 8 (16) against a fine reference
+    assert fine < coarse / 10 and fine < 1e-7, (coarse, fine)
 
 
 def test_equal_pcc_segments_chain_into_one_arc():
@@ -512,21 +514,21 @@ def _batched_reference(fn):
 
 
 @pytest.mark.slow
-@pytest.mark.expensive  # to restate: rotation_substeps < 8 no longer changes the knot path
 def test_twist_bend_hessian_at_straight_converges_with_magnus_substeps():
     """The one inexact second derivative at q = 0 (bend-twist commutator) is Magnus truncation."""
     reference = DERIVATIVE_CASES["poly2-twist"][1]
     q = np.zeros((1, 10))
     ref_hess = reference(q)[2][0]
     errors = []
-    for substeps in (4, 8):
+    # At least 8 Magnus intervals per segment (KinematicsConfig.min_intervals): 8 and 16.
+    for substeps in (8, 16):
         model = pj.PolynomialCurvature(order=2, twist=True)
         scene = pj.Scene(_robot(), model, rotation_substeps=substeps)
         hess = np.asarray(_derivatives(_tip_position(scene))(jnp.asarray(q))[2][0])
         errors.append(np.abs(hess - ref_hess).max())
-    # Measured: 3.6e-7 and 2.3e-8 (ratio 16 = 2^4); 1.4e-9 with 16 sub-steps.
+    # Measured (knot kinematics): 6.2e-8 with 8 intervals, 4.1e-9 with 16 (ratio 15 ~ 2^4).
     assert errors[1] < errors[0] / 12, errors
-    assert errors[1] < 3e-8, errors
+    assert errors[1] < 1e-8, errors
 
 
 def _check_taylor_at_straight(name, jac, hess):
