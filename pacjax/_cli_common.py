@@ -20,6 +20,7 @@ __all__ = [
     "load_with_controls",
     "output_dir",
     "parse_controls",
+    "parse_numbers",
     "progress",
     "summary",
     "timed_solve",
@@ -67,13 +68,18 @@ def output_dir(out: str) -> str:
     return out
 
 
-def parse_controls(text: str, n_tendons: int) -> np.ndarray:
+def parse_numbers(text: str, option: str) -> list[float]:
+    """Comma-separated numbers of a command-line option; a one-line user error otherwise."""
     try:
-        values = [float(v) for v in text.replace(" ", "").split(",") if v != ""]
+        return [float(v) for v in text.replace(" ", "").split(",") if v != ""]
     except ValueError:
         raise click.ClickException(
-            f"--controls must be comma-separated numbers, got {text!r}"
+            f"{option} must be comma-separated numbers, got {text!r}"
         ) from None
+
+
+def parse_controls(text: str, n_tendons: int) -> np.ndarray:
+    values = parse_numbers(text, "--controls")
     if len(values) != n_tendons:
         raise click.ClickException(
             f"--controls has {len(values)} value(s) but the scene has {n_tendons} tendon(s)"

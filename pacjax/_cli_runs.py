@@ -13,7 +13,14 @@ import numpy as np
 
 import pacjax as pj
 
-from ._cli_common import load_with_controls, output_dir, progress, timed_solve, write_json
+from ._cli_common import (
+    load_with_controls,
+    output_dir,
+    parse_numbers,
+    progress,
+    timed_solve,
+    write_json,
+)
 
 
 # ------------------------------------------------------------------------------ simulate
@@ -135,12 +142,7 @@ def _per_tendon(text: str | None, option: str):
     """``--low``/``--high``: one number, or comma-separated numbers (one per tendon)."""
     if text is None:
         return None
-    try:
-        values = [float(v) for v in text.replace(" ", "").split(",") if v != ""]
-    except ValueError:
-        raise click.ClickException(
-            f"{option} must be comma-separated numbers, got {text!r}"
-        ) from None
+    values = parse_numbers(text, option)
     if not values:
         raise click.ClickException(f"{option} is empty")
     return values[0] if len(values) == 1 else values
