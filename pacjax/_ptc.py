@@ -26,6 +26,8 @@ from ._solution import MAX_STEPS, NONFINITE, STALLED, SUCCESS
 
 _MIN_DT = 1e-10
 _MIN_ALPHA = 1.0 / 256
+# Scaled residual below which a non-conservative solve tries plain Newton steps first.
+_NEWTON_NEAR = 1e-2
 
 
 class PTCState(eqx.Module):
@@ -129,15 +131,19 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
             # Far from a solution, shift it by enough to dominate the negative curvature of its
             # symmetric part (a short stretch of the flow). That shift caps dt, so near a
             # solution whose symmetric part is indefinite (a dead moment bending a twistable rod
-            # past ~2 rad) the capped steps creep; there the plain Newton step is tried first
-            # and taken when it halves the residual (one more residual evaluation per step).
+            # past ~2 rad) the capped steps creep; there (scaled residual below
+            # ``_NEWTON_NEAR``, forces 1 % of the elastic scale) the plain Newton step is tried
+            # first and taken when it halves the residual (one more residual evaluation per
+            # step). Far away it is not: from a straight PCC/PAC segment it jumps to the
+            # spurious polar equilibrium (phi along the moment, no bending).
             dt_safe = jnp.where(state.eig < 0, jnp.minimum(state.dt, 0.5 / -state.eig), state.dt)
             flow = jnp.linalg.solve(state.jacobian + eye / dt_safe, -state.residual)
             full = jnp.linalg.solve(state.jacobian, -state.residual)
             r_full, _ = fn(y + full, args)
             halves = jnp.all(jnp.isfinite(full)) & jnp.all(jnp.isfinite(r_full))
             halves = halves & (max_abs(r_full) <= 0.5 * max_abs(state.residual))
-            newton = jnp.where(halves & (state.eig < 0), full, flow)
+            near = max_abs(state.residual) <= _NEWTON_NEAR
+            newton = jnp.where(halves & near & (state.eig < 0), full, flow)
         delta = jnp.where(first, 0.0, jnp.where(escape, state.escape_dy, newton))
 
         def acceptable(r, merit):
