@@ -22,6 +22,7 @@ from ._equilibrium import (
     SolverOptions,
     as_traced_leaves,
     check_controls,
+    check_start_contraction,
     solve_core,
     solver_dtype,
 )
@@ -102,6 +103,7 @@ def iter_batch(
             )
         if not np.all(np.isfinite(q0)):
             raise ValueError("q0 contains NaN or infinite values")
+        check_start_contraction(scene, q0.reshape(-1, scene.n_dofs))
         q0 = np.broadcast_to(q0, (n, scene.n_dofs))
     if params is not None:
         if update is None:

@@ -32,6 +32,7 @@ import optimistix as optx
 
 from ._hessian import energy_derivatives
 from ._ptc import PseudoTransientContinuation, final_code, max_abs
+from ._robot import concrete
 from ._scene import Scene
 from ._solution import Equilibrium
 
@@ -259,9 +260,33 @@ def check_q(scene: Scene, q, dtype) -> jax.Array:
     shape = np.shape(q) if not isinstance(q, jax.core.Tracer) else jnp.shape(q)
     if shape != (scene.n_dofs,):
         raise ValueError(f"q0 must have shape ({scene.n_dofs},), got {shape}")
-    if not isinstance(q, jax.core.Tracer) and not np.all(np.isfinite(np.asarray(q, float))):
-        raise ValueError("q0 contains NaN or infinite values")
+    if not isinstance(q, jax.core.Tracer):
+        if not np.all(np.isfinite(np.asarray(q, float))):
+            raise ValueError("q0 contains NaN or infinite values")
+        check_start_contraction(scene, np.asarray(q, float)[None])
     return jnp.asarray(q, dtype)
+
+
+def check_start_contraction(scene: Scene, qs: np.ndarray) -> None:
+    """Raise a ValueError naming ``q0`` when a start contracts a segment to or past its stop.
+
+    There the energy is infinite (:func:`pacjax._energy.contraction_stop_energy`): no solver
+    can start from it. ``qs`` is (rows, n_dofs) of known values.
+    """
+    limits = np.array([concrete(seg.contraction_limit) for seg in scene.robot.segments], object)
+    if any(x is None for x in limits):
+        return
+    coords = jax.vmap(scene.coordinates)(jnp.asarray(qs))
+    elongation = np.asarray(jax.vmap(jax.vmap(scene.model.elongation))(coords))
+    past = -elongation >= limits.astype(float)[None]
+    if np.any(past):
+        row, seg = np.argwhere(past)[0]
+        where = f" (row {row})" if qs.shape[0] > 1 else ""
+        raise ValueError(
+            f"q0{where} contracts segment {seg} by {-elongation[row, seg]:.6g} m, at or past its "
+            f"contraction_limit {float(limits[seg]):.6g} m (infinite energy: no solver can start "
+            "there)"
+        )
 
 
 def as_traced_leaves(scene: Scene, dtype) -> Scene:

@@ -326,6 +326,13 @@ def test_initial_configuration():
         pj.solve_equilibrium(scene, None, np.full(6, NAN))
     with pytest.raises(ValueError, match="q0"):
         pj.solve_equilibrium(scene, None, np.zeros((2, 6)))
+    # Segment 1 contracted past its stop (0.09 m of 0.1 m): infinite energy at the start.
+    q0 = np.zeros(6)
+    q0[5] = -0.095
+    with pytest.raises(ValueError, match="q0 contracts segment 1 by 0.095 m"):
+        pj.solve_equilibrium(scene, None, q0)
+    with pytest.raises(ValueError, match=r"q0 \(row 1\) contracts segment 1"):
+        pj.solve_batch(scene, np.zeros((2, 2)), np.stack([np.zeros(6), q0]))
 
 
 def test_solver_options_and_scene_type():
