@@ -138,12 +138,16 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
             # spurious polar equilibrium (phi along the moment, no bending).
             dt_safe = jnp.where(state.eig < 0, jnp.minimum(state.dt, 0.5 / -state.eig), state.dt)
             flow = jnp.linalg.solve(state.jacobian + eye / dt_safe, -state.residual)
-            full = jnp.linalg.solve(state.jacobian, -state.residual)
-            r_full, _ = fn(y + full, args)
-            halves = jnp.all(jnp.isfinite(full)) & jnp.all(jnp.isfinite(r_full))
-            halves = halves & (max_abs(r_full) <= 0.5 * max_abs(state.residual))
-            near = max_abs(state.residual) <= _NEWTON_NEAR
-            newton = jnp.where(halves & near & (state.eig < 0), full, flow)
+
+            def try_newton():
+                full = jnp.linalg.solve(state.jacobian, -state.residual)
+                r_full, _ = fn(y + full, args)
+                halves = jnp.all(jnp.isfinite(full)) & jnp.all(jnp.isfinite(r_full))
+                halves = halves & (max_abs(r_full) <= 0.5 * max_abs(state.residual))
+                return jnp.where(halves, full, flow)
+
+            near = (max_abs(state.residual) <= _NEWTON_NEAR) & (state.eig < 0)
+            newton = jax.lax.cond(near, try_newton, lambda: flow)
         delta = jnp.where(first, 0.0, jnp.where(escape, state.escape_dy, newton))
 
         def acceptable(r, merit):
