@@ -273,12 +273,13 @@ def check_start_contraction(scene: Scene, qs: np.ndarray) -> None:
     There the energy is infinite (:func:`pacjax._energy.contraction_stop_energy`): no solver
     can start from it. ``qs`` is (rows, n_dofs) of known values.
     """
-    limits = np.array([concrete(seg.contraction_limit) for seg in scene.robot.segments], object)
-    if any(x is None for x in limits):
+    known = [concrete(seg.contraction_limit) for seg in scene.robot.segments]
+    if any(x is None for x in known):
         return
+    limits = np.asarray(known, float)
     coords = jax.vmap(scene.coordinates)(jnp.asarray(qs))
     elongation = np.asarray(jax.vmap(jax.vmap(scene.model.elongation))(coords))
-    past = -elongation >= limits.astype(float)[None]
+    past = -elongation >= limits[None]
     if np.any(past):
         row, seg = np.argwhere(past)[0]
         where = f" (row {row})" if qs.shape[0] > 1 else ""

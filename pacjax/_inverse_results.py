@@ -9,6 +9,8 @@ import equinox as eqx
 import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
+from ._solution import describe_codes
+
 #: Result codes of an inverse solve.
 REACHED = 0
 NOT_REACHED = 1
@@ -59,10 +61,7 @@ class InverseResult(eqx.Module):
     @property
     def message(self) -> str | list[str]:
         """What happened, in words (a list for a batch)."""
-        codes = np.asarray(self.code)
-        if codes.ndim == 0:
-            return MESSAGES[int(codes)]
-        return [MESSAGES[int(c)] for c in codes.reshape(-1)]
+        return describe_codes(self.code, MESSAGES)
 
 
 class Tracking(eqx.Module):

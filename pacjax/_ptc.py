@@ -134,7 +134,7 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
             # past ~2 rad) the capped steps creep; there (scaled residual below
             # ``_NEWTON_NEAR``, forces 1 % of the elastic scale) the plain Newton step is tried
             # first and taken when it halves the residual (one more residual evaluation per
-            # step). Far away it is not: from a straight PCC/PAC segment it jumps to the
+            # such step). Far away it is not: from a straight PCC/PAC segment it jumps to the
             # spurious polar equilibrium (phi along the moment, no bending).
             dt_safe = jnp.where(state.eig < 0, jnp.minimum(state.dt, 0.5 / -state.eig), state.dt)
             flow = jnp.linalg.solve(state.jacobian + eye / dt_safe, -state.residual)

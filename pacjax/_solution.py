@@ -49,7 +49,12 @@ class Equilibrium(eqx.Module):
     @property
     def reason(self) -> str | list[str]:
         """Why the solve stopped, in words (a list for a batch)."""
-        codes = np.asarray(self.result)
-        if codes.ndim == 0:
-            return REASONS[int(codes)]
-        return [REASONS[int(c)] for c in codes.reshape(-1)]
+        return describe_codes(self.result, REASONS)
+
+
+def describe_codes(codes, words: dict) -> str | list[str]:
+    """Result code(s) in words: a string for one code, a list for a batch."""
+    codes = np.asarray(codes)
+    if codes.ndim == 0:
+        return words[int(codes)]
+    return [words[int(c)] for c in codes.reshape(-1)]
