@@ -1,11 +1,16 @@
-"""Equilibria for batches of controls: vmapped, chunked, warm-started, sharded across devices.
+"""Equilibria for batches of controls: vmapped, pooled, warm-started, sharded across devices.
 
-Each chunk is one compiled, ``vmap``-ed call of the same solver as :func:`solve_equilibrium`, so
-results agree with single solves to solver tolerance. Chunks have a fixed size (the last one is
-padded), so a batch of any length compiles once. With several devices (``jax.local_devices()``),
-every chunk is sharded along the batch axis with ``jax.sharding`` and XLA runs the shards in
-parallel. In a multi-host run (``jax.distributed.initialize()``) each process passes the rows
-it owns and shards them over its own devices; see docs/multihost.md.
+Rows are solved in a pool of ``chunk_size`` slots: one compiled, ``vmap``-ed call runs the
+continuation of every slot for a few steps (:data:`STEPS_PER_ROUND`), and a slot whose row has
+finished is refilled with the next row. A ``vmap``-ed loop runs as many steps as its slowest row,
+so without the refill every chunk would cost its slowest row's step count times its size; with
+it, a long batch costs about the mean. Each row follows exactly the iterates of
+:func:`solve_equilibrium` (the same root finder, resumed round after round), so results agree
+with single solves. The pool has a fixed size, so a batch of any length compiles once. With
+several devices (``jax.local_devices()``), the pool is sharded along the batch axis with
+``jax.sharding`` and XLA runs the shards in parallel. In a multi-host run
+(``jax.distributed.initialize()``) each process passes the rows it owns and shards them over its
+own devices; see docs/multihost.md.
 """
 
 import dataclasses
@@ -20,14 +25,26 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from ._equilibrium import (
     SolverOptions,
+    _Scaled,
     as_traced_leaves,
     check_controls,
     check_start_contraction,
+    equilibrium_from,
+    make_solver,
+    max_total_steps,
     solve_core,
     solver_dtype,
+    start_point,
+    static_load_sites,
 )
 from ._scene import Scene
 from ._solution import Equilibrium
+
+#: Continuation steps per round of the slot pool (a finished row waits at most this many
+#: steps for its slot to be refilled).
+STEPS_PER_ROUND = 4
+
+_TAGS = frozenset()
 
 
 @eqx.filter_jit
@@ -37,6 +54,68 @@ def _solve_chunk(scene, controls, q0, opts, params, update):
         return solve_core(sc, u, q, opts)
 
     return jax.vmap(one)(controls, q0, params)
+
+
+@eqx.filter_jit
+def _advance(scene, opts, update, controls, params, y, state, reset, q_reset, active):
+    """One round of the slot pool: restart the ``reset`` slots from ``q_reset``, then run every
+    active slot's continuation for up to :data:`STEPS_PER_ROUND` steps (fewer when all are done).
+
+    The steps are those of :func:`pacjax._equilibrium.solve_core` (the same root finder, resumed
+    round after round), so a row's iterates do not depend on which rows share the pool.
+    Returns the new ``(y, state)``, whether each slot is done, and its :class:`Equilibrium`.
+    """
+    dtype = controls.dtype
+    limit = max_total_steps(opts)
+    fn = _Scaled.root_fn
+
+    def one(u, p, y_, st_, reset_, q_, active_):
+        sc = scene if update is None else update(scene, p)
+        problem = _Scaled.build(sc, u)
+        solver = make_solver(sc, opts, dtype)
+        f_struct, aux_struct = jax.eval_shape(fn, y_, problem)
+        y_start = start_point(problem, q_)
+        st_start = solver.init(fn, y_start, problem, None, f_struct, aux_struct, _TAGS)
+        y_ = jnp.where(reset_, y_start, y_)
+        st_ = jtu.tree_map(lambda a, b: jnp.where(reset_, a, b), st_start, st_)
+
+        def running(y, st):
+            # As optimistix.root_find: stop when the solver terminates, y is not finite or
+            # the step budget is spent.
+            done, _ = solver.terminate(fn, y, problem, None, st, _TAGS)
+            finite = jnp.all(jnp.isfinite(y))
+            return active_ & ~done & finite & (st.step < limit)
+
+        def cond(carry):
+            y, st, k = carry
+            return (k < STEPS_PER_ROUND) & running(y, st)
+
+        def body(carry):
+            y, st, k = carry
+            y, st, _ = solver.step(fn, y, problem, None, st, _TAGS)
+            return y, st, k + 1
+
+        y_, st_, _ = jax.lax.while_loop(cond, body, (y_, st_, jnp.asarray(0)))
+        eq = equilibrium_from(sc, problem, solver, y_, st_, st_.step, opts.tol)
+        return y_, st_, ~running(y_, st_), eq
+
+    return jax.vmap(one)(controls, params, y, state, reset, q_reset, active)
+
+
+def _initial_state(scene, opts, size, dtype, sharding):
+    """Placeholder ``(y, state)`` of a pool of ``size`` slots (every slot is reset first)."""
+    n = scene.n_dofs
+    solver = make_solver(scene, opts, dtype)
+    y = jnp.zeros(n, dtype)
+    f_struct = jax.ShapeDtypeStruct((n,), dtype)
+    state = solver.init(None, y, None, None, f_struct, None, _TAGS)
+    # Strongly typed, as _advance returns them (a weak type would compile a second version).
+    y, state = jtu.tree_map(
+        lambda x: jnp.asarray(jnp.broadcast_to(x, (size,) + x.shape), x.dtype), (y, state)
+    )
+    if sharding is not None:
+        y, state = jax.device_put((y, state), sharding)
+    return y, state
 
 
 def _nearest_rows(done_controls: np.ndarray, controls: np.ndarray) -> np.ndarray:
@@ -82,7 +161,7 @@ def iter_batch(
         raise ValueError(f"chunk_size must be >= 1, got {chunk_size}")
     opts = SolverOptions(**options)
     dtype = solver_dtype(scene)
-    scene = as_traced_leaves(scene, dtype)
+    scene = static_load_sites(as_traced_leaves(scene, dtype))
     try:
         controls_batch = np.asarray(controls_batch, dtype=float)
     except (TypeError, ValueError):
@@ -119,29 +198,132 @@ def iter_batch(
     chunk = -(-chunk // n_devices) * n_devices  # a multiple of the device count
     sharding = _sharding(n_devices)
 
-    done_u: list[np.ndarray] = []
-    done_q: list[np.ndarray] = []
-    for start in range(0, n, chunk):
-        rows = slice(start, min(start + chunk, n))
-        u = controls_batch[rows]
-        if q0 is not None:
-            q = q0[rows]
-        elif warm_start and done_u:
-            prev_u, prev_q = np.concatenate(done_u), np.concatenate(done_q)
-            q = prev_q[_nearest_rows(prev_u, u)]
-        else:
-            q = np.zeros((u.shape[0], scene.n_dofs))
-        p = None if params is None else jtu.tree_map(lambda x, r=rows: x[r], params)
-        eq = _run_chunk(scene, u, q, p, update, opts, chunk, dtype, sharding)
-        if fallback and opts.method == "ptc" and not np.all(np.asarray(eq.converged)):
-            eq = _retry_failed(scene, u, q, p, update, opts, eq, dtype)
-        if warm_start:
-            ok = np.asarray(eq.converged)
-            done_u.append(u[ok])
-            done_q.append(np.asarray(eq.q)[ok])
-            if sum(len(x) for x in done_u) > 4 * chunk:  # keep the neighbour pool bounded
-                done_u, done_q = done_u[-4:], done_q[-4:]
-        yield rows, eq
+    starts = _Starts(scene.n_dofs, q0, warm_start, chunk)
+    pool = _pool_solve(scene, controls_batch, starts, params, update, opts, chunk, dtype, sharding)
+    buffers: dict[int, _ChunkBuffer] = {}
+    next_chunk = 0
+    for rows, q_start, eq_rows in pool:
+        starts.record(controls_batch[rows], eq_rows)
+        for c in np.unique(rows // chunk):
+            if c not in buffers:
+                lo = c * chunk
+                buffers[c] = _ChunkBuffer(slice(lo, min(lo + chunk, n)), eq_rows)
+            mine = rows // chunk == c
+            buffers[c].put(rows[mine], q_start[mine], eq_rows, mine)
+        while next_chunk in buffers and buffers[next_chunk].full:
+            part = buffers.pop(next_chunk)
+            next_chunk += 1
+            eq = jtu.tree_map(jnp.asarray, part.eq)
+            if fallback and opts.method == "ptc" and not np.all(part.eq.converged):
+                u = controls_batch[part.rows]
+                p = None if params is None else jtu.tree_map(lambda x, r=part.rows: x[r], params)
+                eq = _retry_failed(scene, u, part.q_start, p, update, opts, eq, dtype)
+            yield part.rows, eq
+
+
+class _Starts:
+    """Starting configurations: given, straight, or the equilibrium of the nearest command
+    solved so far (a bounded pool of converged rows)."""
+
+    def __init__(self, n_dofs, q0, warm_start, pool_size):
+        self.n_dofs, self.q0, self.warm = n_dofs, q0, warm_start
+        self.limit = 4 * pool_size
+        self.done_u = np.zeros((0, 0))
+        self.done_q = np.zeros((0, n_dofs))
+
+    def __call__(self, rows, controls):
+        if self.q0 is not None:
+            return self.q0[rows]
+        if self.warm and len(self.done_u):
+            return self.done_q[_nearest_rows(self.done_u, controls)]
+        return np.zeros((len(rows), self.n_dofs))
+
+    def record(self, controls, eq_rows):
+        if not self.warm:
+            return
+        ok = np.asarray(eq_rows.converged)
+        u = controls[ok]
+        q = np.asarray(eq_rows.q)[ok]
+        if len(self.done_u):
+            u, q = np.concatenate([self.done_u, u]), np.concatenate([self.done_q, q])
+        self.done_u, self.done_q = u[-self.limit :], q[-self.limit :]
+
+
+class _ChunkBuffer:
+    """Results of the rows of one output chunk, filled as their slots finish."""
+
+    def __init__(self, rows: slice, like: Equilibrium):
+        self.rows = rows
+        m = rows.stop - rows.start
+        self.eq = jtu.tree_map(lambda x: np.empty((m,) + x.shape[1:], x.dtype), like)
+        self.q_start = np.empty((m,) + like.q.shape[1:])
+        self.missing = m
+
+    def put(self, rows, q_start, eq_rows, mine):
+        at = rows - self.rows.start
+
+        def fill(buf, x):
+            buf[at] = x[mine]
+
+        jtu.tree_map(fill, self.eq, eq_rows)
+        self.q_start[at] = q_start
+        self.missing -= len(rows)
+
+    @property
+    def full(self) -> bool:
+        return self.missing == 0
+
+
+def _pool_solve(scene, controls, starts, params, update, opts, size, dtype, sharding):
+    """Solve every row in a pool of ``size`` slots, refilled as rows finish (the batch does
+    not wait for its slowest row). Yields ``(rows, q_start, Equilibrium)`` of finished rows."""
+    n = controls.shape[0]
+    slot_row = np.full(size, -1)
+    u_pool = np.zeros((size, controls.shape[1]))
+    q_pool = np.zeros((size, scene.n_dofs))
+    if params is None:
+        p_pool = np.zeros((size,))
+    else:
+        p_pool = jtu.tree_map(lambda x: np.zeros((size,) + x.shape[1:], x.dtype), params)
+    y, state = _initial_state(scene, opts, size, dtype, sharding)
+    next_row = 0
+    while True:
+        free = np.flatnonzero(slot_row < 0)[: n - next_row]
+        rows = np.arange(next_row, next_row + len(free))
+        next_row += len(free)
+        reset = np.zeros(size, bool)
+        reset[free] = True
+        slot_row[free] = rows
+        u_pool[free] = controls[rows]
+        q_pool[free] = starts(rows, controls[rows])
+        if params is not None:
+
+            def assign(pool, x, free=free, rows=rows):
+                pool[free] = x[rows]
+
+            jtu.tree_map(assign, p_pool, params)
+        active = slot_row >= 0
+        if not active.any():
+            return
+        inputs = (
+            jnp.asarray(u_pool, dtype),
+            jtu.tree_map(jnp.asarray, p_pool),
+            jnp.asarray(reset),
+            jnp.asarray(q_pool, dtype),
+            jnp.asarray(active),
+        )
+        if sharding is not None:
+            inputs = jax.device_put(inputs, sharding)
+        u_dev, p_dev, reset_dev, q_dev, active_dev = inputs
+        y, state, done, eq = _advance(
+            scene, opts, update, u_dev, p_dev, y, state, reset_dev, q_dev, active_dev
+        )
+        done = np.asarray(done) & active
+        if done.any():
+            slots = np.flatnonzero(done)
+            eq_rows = jtu.tree_map(lambda x, s=slots: np.asarray(x)[s], eq)
+            yield slot_row[slots], q_pool[slots].copy(), eq_rows
+            slot_row[slots] = -1
 
 
 def _pad(x, size):
@@ -201,9 +383,10 @@ def solve_batch(
         q0: starting configuration(s), (n_dofs,) or (batch, n_dofs); default straight.
         params: optional pytree of per-row values (leading axis ``batch``), e.g. payload masses,
             applied to the scene by ``update(scene, row) -> scene`` (use ``eqx.tree_at``).
-        chunk_size: rows per compiled call (memory is bounded by it).
-        warm_start: start each row of a chunk from the equilibrium of the nearest command
-            solved in earlier chunks (helps on grids and paths).
+        chunk_size: slots of the solver pool (rows solved at once) and rows per output chunk;
+            memory is bounded by it.
+        warm_start: start each row from the equilibrium of the nearest command solved so far
+            (the first ``chunk_size`` rows start straight; helps on grids and paths).
         devices: number of devices to shard each chunk over (default all).
         progress: show a progress bar (default: when there is more than one chunk).
         fallback: re-solve rows that failed with the diffrax flow.

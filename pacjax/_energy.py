@@ -11,8 +11,27 @@ from ._rotation import hat
 from ._strain import StrainModel
 
 
+def section_stiffness(
+    segment: Segment, quadrature_points: int, dtype
+) -> tuple[Float[Array, " p"], Float[Array, " p"]]:
+    """Bending and torsion stiffness (N m^2) at the elastic quadrature nodes (taper included,
+    stiffening with contraction not: that depends on the configuration)."""
+    nodes = jnp.asarray(gauss_legendre(quadrature_points)[0], dtype)
+    bending = segment.bending_stiffness.astype(dtype) * jnp.ones_like(nodes)
+    torsion = segment.torsion_stiffness.astype(dtype) * jnp.ones_like(nodes)
+    scale = segment.section_scale(nodes)
+    if scale is not None:
+        bending = bending * scale**4
+        torsion = torsion * scale**4
+    return bending, torsion
+
+
 def segment_elastic_energy(
-    model: StrainModel, segment: Segment, q: Float[Array, " d"], quadrature_points: int
+    model: StrainModel,
+    segment: Segment,
+    q: Float[Array, " d"],
+    quadrature_points: int,
+    stiffness: tuple[Float[Array, " p"], Float[Array, " p"]] | None = None,
 ) -> Float[Array, ""]:
     """Elastic energy (J) of one segment.
 
@@ -21,6 +40,7 @@ def segment_elastic_energy(
     stiffness and PAC's affine curvature this is exactly the paper's Hankel form
     ``1/2 k_b [c0 c1] H [c0 c1]^T``, ``k_b = EI / L``; a taper makes ``H`` the weighted Gram
     matrix. Gauss-Legendre with ``n`` points is exact up to polynomial degree ``2 n - 1``.
+    ``stiffness``: :func:`section_stiffness`, when already computed.
     """
     nodes, weights = gauss_legendre(quadrature_points)
     nodes = jnp.asarray(nodes, q.dtype)
@@ -29,12 +49,9 @@ def segment_elastic_energy(
     elongation = model.elongation(q)
     strain = jax.vmap(model.strain, in_axes=(None, 0))(q, nodes)
 
-    bending = segment.bending_stiffness.astype(q.dtype) * jnp.ones_like(nodes)
-    torsion = segment.torsion_stiffness.astype(q.dtype) * jnp.ones_like(nodes)
-    scale = segment.section_scale(nodes)
-    if scale is not None:
-        bending = bending * scale**4
-        torsion = torsion * scale**4
+    if stiffness is None:
+        stiffness = section_stiffness(segment, quadrature_points, q.dtype)
+    bending, torsion = stiffness
     if segment.stiffening is not None:
         bending = bending * segment.stiffening(elongation, length)
 
@@ -75,21 +92,40 @@ def contraction_stop_energy(
 
 
 def elastic_energy(
-    model: StrainModel, robot: Robot, q: Float[Array, "n d"], quadrature_points: int
+    model: StrainModel,
+    robot: Robot,
+    q: Float[Array, "n d"],
+    quadrature_points: int,
+    stiffness: tuple[Float[Array, "n p"], Float[Array, "n p"]] | None = None,
 ) -> Float[Array, ""]:
-    """Elastic energy (J) of all segments: one ``vmap`` when they share a structure."""
+    """Elastic energy (J) of all segments: one ``vmap`` when they share a structure.
+
+    ``stiffness``: every segment's :func:`section_stiffness`, stacked, when already computed.
+    """
     segments = robot.segments
+    if stiffness is None:
+        stiffness = robot_section_stiffness(robot, quadrature_points, q.dtype)
     structures = {jtu.tree_structure(seg) for seg in segments}
     if len(structures) == 1:
         stacked = jtu.tree_map(lambda *xs: jnp.stack(xs), *segments)
         per_segment = jax.vmap(
-            lambda seg, qi: segment_elastic_energy(model, seg, qi, quadrature_points)
-        )(stacked, q)
+            lambda seg, qi, k: segment_elastic_energy(model, seg, qi, quadrature_points, k)
+        )(stacked, q, stiffness)
         return jnp.sum(per_segment)
     return sum(
-        segment_elastic_energy(model, seg, q[i], quadrature_points)
+        segment_elastic_energy(
+            model, seg, q[i], quadrature_points, (stiffness[0][i], stiffness[1][i])
+        )
         for i, seg in enumerate(segments)
     )
+
+
+def robot_section_stiffness(
+    robot: Robot, quadrature_points: int, dtype
+) -> tuple[Float[Array, "n p"], Float[Array, "n p"]]:
+    """:func:`section_stiffness` of every segment, stacked."""
+    per = [section_stiffness(seg, quadrature_points, dtype) for seg in robot.segments]
+    return jnp.stack([b for b, _ in per]), jnp.stack([t for _, t in per])
 
 
 def gravity_masses(

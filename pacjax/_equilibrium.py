@@ -33,7 +33,7 @@ import optimistix as optx
 from ._hessian import energy_derivatives
 from ._ptc import PseudoTransientContinuation, final_code, max_abs
 from ._robot import concrete
-from ._scene import Scene
+from ._scene import Scene, SceneConstants
 from ._solution import Equilibrium
 
 
@@ -103,33 +103,40 @@ class _Scaled(eqx.Module):
     controls: jax.Array
     sigma: jax.Array
     row: jax.Array
+    consts: SceneConstants
 
     @staticmethod
     def build(scene: Scene, controls: jax.Array) -> "_Scaled":
+        """The scaled problem; the scene's parameter-only terms are computed here, once, not
+        in every energy evaluation of the solver loop (they stay differentiable)."""
         dtype = controls.dtype
         sigma = jax.lax.stop_gradient(scene.coordinate_scale(dtype))
         d = jax.lax.stop_gradient(scene.elastic_stiffness_diagonal(dtype))
-        return _Scaled(scene, controls, sigma, 1.0 / (d * sigma))
+        return _Scaled(scene, controls, sigma, 1.0 / (d * sigma), scene.constants(dtype))
 
     def q(self, y):
         return self.sigma * y
 
     def residual(self, y):
-        return self.scene.residual(self.q(y), self.controls) * self.row
+        return self.scene.residual(self.q(y), self.controls, self.consts) * self.row
 
     def residual_and_merit(self, y):
         """Scaled residual and the merit that a step must not raise (energy or residual)."""
         q = self.q(y)
         if self.scene.is_conservative:
-            energy, grad = jax.value_and_grad(self.scene.potential_energy)(q, self.controls)
+            energy, grad = jax.value_and_grad(self.scene.potential_energy)(
+                q, self.controls, self.consts
+            )
             return grad * self.row, energy
-        r = self.scene.residual(q, self.controls) * self.row
+        r = self.residual(y)
         return r, 0.5 * jnp.sum(r * r)
 
     def linearise(self, y):
         """Scaled residual and its Jacobian from the structured Hessian (conservative scenes):
         ``(dr/dy, (r, (energy, weights)))``."""
-        energy, grad, hessian = energy_derivatives(self.scene, self.q(y), self.controls)
+        energy, grad, hessian = energy_derivatives(
+            self.scene, self.q(y), self.controls, self.consts
+        )
         jac = self.row[:, None] * hessian * self.sigma[None, :]
         return jac, (grad * self.row, (energy, self.weights()))
 
@@ -168,49 +175,71 @@ def _stability_tol(opts, dtype):
     )
 
 
-def solve_core(scene: Scene, controls, q0, opts: SolverOptions) -> Equilibrium:
-    """One equilibrium (traceable; :func:`solve_equilibrium` and the batch solver wrap it)."""
-    problem = _Scaled.build(scene, controls)
-    frozen = jax.lax.stop_gradient(problem)
-    y0 = jax.lax.stop_gradient(q0) / frozen.sigma
-    flow_steps = jnp.asarray(0)
-    if opts.method == "flow":
-        y0, flow_steps = _flow_start(frozen, y0, opts)
-    solver = PseudoTransientContinuation(
+def make_solver(scene: Scene, opts: SolverOptions, dtype) -> PseudoTransientContinuation:
+    """The continuation root finder for a scene's structure and the solver options."""
+    return PseudoTransientContinuation(
         rtol=0.0,
         atol=opts.tol,
         initial_dt=opts.initial_dt,
         max_dt=opts.max_dt,
         escapes=opts.escapes,
         escape_size=opts.escape_size,
-        stability_tol=_stability_tol(opts, q0.dtype),
+        stability_tol=_stability_tol(opts, dtype),
         symmetric=scene.is_conservative,
         structured=scene.is_conservative and opts.hessian == "structured",
     )
+
+
+def max_total_steps(opts: SolverOptions) -> int:
+    """Continuation steps allowed in all (``max_steps`` per escape attempt)."""
+    return opts.max_steps * (1 + opts.escapes)
+
+
+def start_point(problem: "_Scaled", q0):
+    """Scaled starting point ``y0 = q0 / sigma`` (no derivative flows through the start)."""
+    return jax.lax.stop_gradient(q0) / jax.lax.stop_gradient(problem.sigma)
+
+
+def equilibrium_from(
+    scene: Scene, problem: "_Scaled", solver, y, state, steps, tol: float
+) -> Equilibrium:
+    """The :class:`Equilibrium` at the continuation's final iterate ``y`` and state."""
+    residual_norm = max_abs(state.residual)
+    converged = residual_norm <= tol
+    energy = state.merit if scene.is_conservative else jnp.asarray(jnp.nan, state.merit.dtype)
+    return Equilibrium(
+        q=jax.lax.stop_gradient(problem.sigma) * y,
+        converged=converged,
+        residual_norm=residual_norm,
+        stable=state.eig > -solver.stability_tol,
+        min_hessian_eigenvalue=state.eig,
+        steps=steps,
+        result=final_code(state, converged),
+        energy=energy,
+    )
+
+
+def solve_core(scene: Scene, controls, q0, opts: SolverOptions) -> Equilibrium:
+    """One equilibrium (traceable; :func:`solve_equilibrium` and the batch solver wrap it)."""
+    problem = _Scaled.build(scene, controls)
+    frozen = jax.lax.stop_gradient(problem)
+    y0 = start_point(problem, q0)
+    flow_steps = jnp.asarray(0)
+    if opts.method == "flow":
+        y0, flow_steps = _flow_start(frozen, y0, opts)
+    solver = make_solver(scene, opts, q0.dtype)
     sol = optx.root_find(
         _Scaled.root_fn,
         solver,
         y0,
         args=problem,
         has_aux=True,
-        max_steps=opts.max_steps * (1 + opts.escapes),
+        max_steps=max_total_steps(opts),
         throw=False,
         adjoint=optx.ImplicitAdjoint(linear_solver=lx.LU()),
     )
-    state = sol.state
-    residual_norm = max_abs(state.residual)
-    converged = residual_norm <= opts.tol
-    energy = state.merit if scene.is_conservative else jnp.asarray(jnp.nan, state.merit.dtype)
-    return Equilibrium(
-        q=frozen.sigma * sol.value,
-        converged=converged,
-        residual_norm=residual_norm,
-        stable=state.eig > -solver.stability_tol,
-        min_hessian_eigenvalue=state.eig,
-        steps=sol.stats["num_steps"] + flow_steps,
-        result=final_code(state, converged),
-        energy=energy,
-    )
+    steps = sol.stats["num_steps"] + flow_steps
+    return equilibrium_from(scene, frozen, solver, sol.value, sol.state, steps, opts.tol)
 
 
 _solve = eqx.filter_jit(solve_core)
@@ -304,6 +333,25 @@ def as_traced_leaves(scene: Scene, dtype) -> Scene:
     return jtu.tree_map(convert, scene)
 
 
+def static_load_sites(scene: Scene) -> Scene:
+    """Load sites (``s`` of point masses, forces and moments) whose value is known now become
+    Python floats, which ``jit`` treats as compile-time constants.
+
+    A known site is a knot of the kinematics, evaluated with the tendon guides for free; a traced
+    one costs its own frame integration and its own Hessian block in every solver step (it more
+    than doubled the compiled solver of the paper's robot). A new site value compiles again; a
+    site set per row (``solve_batch(params=..., update=...)``) or differentiated stays traced.
+    """
+    loads = []
+    for load in scene.loads:
+        site = getattr(load, "s", None)
+        value = None if site is None or isinstance(site, jax.core.Tracer) else concrete(site)
+        if value is not None and value.shape == ():
+            load = eqx.tree_at(lambda x: x.s, load, float(value))
+        loads.append(load)
+    return eqx.tree_at(lambda sc: sc.loads, scene, tuple(loads))
+
+
 def solver_dtype(scene: Scene):
     """The floating dtype the scene's parameters are stored in."""
     leaves = [x for x in jtu.tree_leaves(scene) if eqx.is_inexact_array(x)]
@@ -332,7 +380,7 @@ def solve_equilibrium(
         raise TypeError(f"scene must be a pacjax.Scene, got {type(scene).__name__}")
     opts = SolverOptions(**options)
     dtype = solver_dtype(scene)
-    scene = as_traced_leaves(scene, dtype)
+    scene = static_load_sites(as_traced_leaves(scene, dtype))
     controls = check_controls(scene, controls, dtype)
     q0 = check_q(scene, q0, dtype)
     eq = _solve(scene, controls, q0, opts)

@@ -19,7 +19,7 @@ import jax.tree_util as jtu
 from jaxtyping import Array, Float
 
 from ._kinematics import segment_knot_frames
-from ._scene import Scene
+from ._scene import Scene, SceneConstants
 
 
 def _contract(jac, delta):
@@ -28,12 +28,16 @@ def _contract(jac, delta):
 
 
 def energy_derivatives(
-    scene: Scene, q: Float[Array, " n_dofs"], controls
+    scene: Scene, q: Float[Array, " n_dofs"], controls, consts: SceneConstants | None = None
 ) -> tuple[Float[Array, ""], Float[Array, " n_dofs"], Float[Array, "n_dofs n_dofs"]]:
-    """``(V, dV/dq, d2V/dq2)`` of a scene at ``q`` (exact, structured; see module docstring)."""
+    """``(V, dV/dq, d2V/dq2)`` of a scene at ``q`` (exact, structured; see module docstring).
+
+    ``consts``: :meth:`Scene.constants`, when already computed.
+    """
     n_dofs = q.shape[0]
-    e_el, g_el = jax.value_and_grad(scene.elastic_energy)(q)
-    h_el = jax.hessian(scene.elastic_energy)(q)
+    consts = scene.constants(q.dtype) if consts is None else consts
+    e_el, g_el = jax.value_and_grad(scene.elastic_energy)(q, consts)
+    h_el = jax.hessian(scene.elastic_energy)(q, consts)
     plan = scene._energy_plan()
     if plan is None:
         return e_el, g_el, h_el
@@ -43,7 +47,7 @@ def energy_derivatives(
     dtype = q.dtype
     lengths = scene.robot.stacked("length").astype(dtype)
     grid = jnp.asarray(plan.knots.s, dtype)
-    weights = plan.node_mass(dtype)
+    weights = consts.node_mass
 
     def segment(qi, li, ki, wi):
         return segment_knot_frames(scene.model, qi, li, ki, wi)
@@ -64,7 +68,7 @@ def energy_derivatives(
     traced_jac = tuple(j for j, _ in traced)
 
     def psi(local):
-        return scene._load_energy(local, controls, plan)
+        return scene._load_energy(local, controls, plan, consts)
 
     local = (seg_val, traced_val)
     e_load, lam = jax.value_and_grad(psi)(local)

@@ -12,7 +12,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from ._energy import elastic_energy, mass_beyond, moment_cotangent
+from ._energy import elastic_energy, mass_beyond, moment_cotangent, robot_section_stiffness
 from ._kinematics import (
     KinematicsConfig,
     Knots,
@@ -159,6 +159,22 @@ class _EnergyPlan:
         if self.gravity is None:
             return None
         return mass_beyond(self._robot, self.knots.node_s, dtype)
+
+
+class SceneConstants(eqx.Module):
+    """What the energy needs from the scene's parameters alone (not from ``q`` or the controls).
+
+    A solver computes it once per solve (:meth:`Scene.constants`) instead of once per energy
+    evaluation inside its loop, where every derivative would trace it again. It stays a
+    differentiable function of the parameters, so implicit gradients flow through it.
+    """
+
+    bending: Float[Array, "n p"]
+    torsion: Float[Array, "n p"]
+    node_mass: Float[Array, "n i m"] | None
+    body_mass: Float[Array, " n"] | None
+    guide_offsets: Float[Array, "g 3"] | None
+    rest_lengths: Float[Array, " m"] | None
 
 
 class Scene(eqx.Module):
@@ -372,17 +388,41 @@ class Scene(eqx.Module):
         )
 
     # ----------------------------------------------------------------------------- energy
-    def elastic_energy(self, q: Float[Array, " n_dofs"]) -> Float[Array, ""]:
-        return elastic_energy(self.model, self.robot, self.coordinates(q), self.quadrature_points)
+    def constants(self, dtype=float) -> SceneConstants:
+        """The parameter-only part of the energy (see :class:`SceneConstants`)."""
+        bending, torsion = robot_section_stiffness(self.robot, self.quadrature_points, dtype)
+        plan = self._energy_plan()
+        node_mass = body_mass = offsets = rest = None
+        if plan is not None and plan.gravity is not None:
+            node_mass = plan.node_mass(dtype)
+            body_mass = mass_beyond(self.robot, np.zeros(self.n_segments), dtype)
+        if plan is not None and plan.routing is not None:
+            offsets = plan.routing.local_offsets(self.tendons, dtype)
+            rest = self.rest_tendon_lengths(dtype)
+        return SceneConstants(bending, torsion, node_mass, body_mass, offsets, rest)
 
-    def potential_energy(self, q: Float[Array, " n_dofs"], controls) -> Float[Array, ""]:
-        """Potential energy ``V(q; theta, u)`` (J): elastic, gravity, tendons, world forces."""
-        energy = self.elastic_energy(q)
+    def elastic_energy(
+        self, q: Float[Array, " n_dofs"], consts: SceneConstants | None = None
+    ) -> Float[Array, ""]:
+        stiffness = None if consts is None else (consts.bending, consts.torsion)
+        return elastic_energy(
+            self.model, self.robot, self.coordinates(q), self.quadrature_points, stiffness
+        )
+
+    def potential_energy(
+        self, q: Float[Array, " n_dofs"], controls, consts: SceneConstants | None = None
+    ) -> Float[Array, ""]:
+        """Potential energy ``V(q; theta, u)`` (J): elastic, gravity, tendons, world forces.
+
+        ``consts``: :meth:`constants` when already computed (solvers pass it).
+        """
+        consts = self.constants(q.dtype) if consts is None else consts
+        energy = self.elastic_energy(q, consts)
         plan = self._energy_plan()
         if plan is None:
             return energy
-        local = self._local_kinematics(self.coordinates(q), plan)
-        return energy + self._load_energy(local, controls, plan)
+        local = self._local_kinematics(self.coordinates(q), plan, consts)
+        return energy + self._load_energy(local, controls, plan, consts)
 
     # The energy is E_el(q) + Psi(L_0(q_0), ..., L_n-1(q_n-1)): each segment's local kinematics
     # L_i (frames at its knots in its own base frame) depends on its own coordinates only, and
@@ -392,14 +432,15 @@ class Scene(eqx.Module):
         plan = _EnergyPlan(self)
         return plan if plan.points or plan.gravity is not None else None
 
-    def _local_kinematics(self, coords: Float[Array, "n d"], plan: "_EnergyPlan"):
+    def _local_kinematics(
+        self, coords: Float[Array, "n d"], plan: "_EnergyPlan", consts: SceneConstants
+    ):
         """Per-segment local frames at the knots, and the local frames of traced load sites."""
         dtype = coords.dtype
         lengths = self.robot.stacked("length").astype(dtype)
         grid = jnp.asarray(plan.knots.s, dtype)
-        weights = plan.node_mass(dtype)
         segments = jax.vmap(lambda qi, li, ki, wi: segment_knot_frames(self.model, qi, li, ki, wi))(
-            coords, lengths, grid, weights
+            coords, lengths, grid, consts.node_mass
         )
         traced = tuple(self._traced_local(coords[k], k, s_k) for k, s_k in plan.points.traced)
         return segments, traced
@@ -408,7 +449,9 @@ class Scene(eqx.Module):
         length = self.robot.segments[k].length.astype(qk.dtype)
         return local_frame(self.model, qk, length, jnp.asarray(s_k, qk.dtype), self.kinematics)
 
-    def _load_energy(self, local, controls, plan: "_EnergyPlan") -> Float[Array, ""]:
+    def _load_energy(
+        self, local, controls, plan: "_EnergyPlan", consts: SceneConstants
+    ) -> Float[Array, ""]:
         """``Psi``: gravity, tendon and world-force energy (J) from the local kinematics."""
         (rot, pos, moment), traced = local
         dtype = rot.dtype
@@ -431,19 +474,17 @@ class Scene(eqx.Module):
         energy = jnp.zeros((), dtype)
         if plan.gravity is not None:
             accel = plan.gravity.acceleration.astype(dtype)
-            total = mass_beyond(self.robot, np.zeros(self.n_segments), dtype)
             # The body's first mass moment sum_i int rho A L p ds (kg m), by parts.
-            body = jnp.sum(total[:, None] * base_pos + matvec3(base_rot, moment), axis=0)
+            body = jnp.sum(consts.body_mass[:, None] * base_pos + matvec3(base_rot, moment), axis=0)
             energy = energy - body @ accel
             for pm, k in zip(plan.point_masses, plan.mass_ids, strict=True):
                 energy = energy - pm.mass.astype(dtype) * (pos_at[k] @ accel)
         if plan.routing is not None:
             routing = plan.routing
             sl = plan.guide_ids
-            guides = pos_at[sl] + matvec3(rot_at[sl], routing.local_offsets(self.tendons, dtype))
+            guides = pos_at[sl] + matvec3(rot_at[sl], consts.guide_offsets)
             lengths = routing.lengths(guides)
-            rest = routing.rest_lengths(self.tendons, self.robot.stacked("length").astype(dtype))
-            energy = energy + tendon_energy(self.tendons, lengths, rest, controls)
+            energy = energy + tendon_energy(self.tendons, lengths, consts.rest_lengths, controls)
         for f, k in zip(plan.forces, plan.force_ids, strict=True):
             energy = energy - jnp.sum(f.force.astype(dtype) * pos_at[k])
         return energy
@@ -456,7 +497,7 @@ class Scene(eqx.Module):
             return None
         items = followers + moments
         segs = np.asarray([x.segment for x in items])
-        ss = jnp.concatenate([x.s.astype(q.dtype)[None] for x in items])
+        ss = jnp.stack([jnp.asarray(x.s, q.dtype) for x in items])
         (rot, pos), pullback = jax.vjp(lambda q_: self.frames(q_, segs, ss), q)
         dtype = q.dtype
         cot_pos = jnp.zeros_like(pos)
@@ -473,9 +514,11 @@ class Scene(eqx.Module):
         (generalised,) = pullback((cot_rot, cot_pos))
         return generalised
 
-    def residual(self, q: Float[Array, " n_dofs"], controls) -> Float[Array, " n_dofs"]:
+    def residual(
+        self, q: Float[Array, " n_dofs"], controls, consts: SceneConstants | None = None
+    ) -> Float[Array, " n_dofs"]:
         """Equilibrium residual ``F(q) = grad V(q) - Q_nc(q)`` (generalised forces)."""
-        force = jax.grad(self.potential_energy)(q, controls)
+        force = jax.grad(self.potential_energy)(q, controls, consts)
         extra = self.nonconservative_forces(q)
         return force if extra is None else force - extra
 

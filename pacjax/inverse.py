@@ -46,7 +46,7 @@ import jax.tree_util as jtu
 import numpy as np
 
 from ._batch import solve_batch
-from ._equilibrium import solve_equilibrium
+from ._equilibrium import solve_equilibrium, static_load_sites
 from ._inverse_problem import (
     _array,
     _finite,
@@ -245,6 +245,7 @@ def inverse_statics(
     """
     if not isinstance(scene, Scene):
         raise TypeError(f"scene must be a pacjax.Scene, got {type(scene).__name__}")
+    scene = static_load_sites(scene)
     settings = _settings(scene, _kwargs(kwargs))
     tgt = _make_target(scene, target, rotation, orientation_weight, sites)
     starts = []
@@ -335,6 +336,7 @@ def inverse_statics_batch(
     """
     if not isinstance(scene, Scene):
         raise TypeError(f"scene must be a pacjax.Scene, got {type(scene).__name__}")
+    scene = static_load_sites(scene)
     settings = _settings(scene, _kwargs(kwargs))
     tgt = _make_target(scene, targets, rotation, orientation_weight, sites, batched=True)
     n = tgt.points.shape[0]
