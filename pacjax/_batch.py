@@ -1,10 +1,11 @@
 """Equilibria for batches of controls: vmapped, pooled, warm-started, sharded across devices.
 
-Rows are solved in a pool of ``chunk_size`` slots: one compiled, ``vmap``-ed call runs the
-continuation of every slot for a few steps (:data:`STEPS_PER_ROUND`), and a slot whose row has
-finished is refilled with the next row. A ``vmap``-ed loop runs as many steps as its slowest row,
-so without the refill every chunk would cost its slowest row's step count times its size; with
-it, a long batch costs about the mean. Each row follows exactly the iterates of
+Rows are solved in a pool of slots (``chunk_size``, at most :data:`CPU_POOL_SLOTS` per CPU
+device): one compiled, ``vmap``-ed call runs the continuation of every slot for a few steps
+(:data:`STEPS_PER_ROUND`), and a slot whose row has finished is refilled with the next row. A
+``vmap``-ed loop runs as many steps as its slowest row, so without the refill every chunk
+would cost its slowest row's step count times its size; with it, a long batch costs about the
+mean. Each row follows the iterates of
 :func:`solve_equilibrium` (the same root finder, resumed round after round), so results agree
 with single solves. The pool has a fixed size, so a batch of any length compiles once. With
 several devices (``jax.local_devices()``), the pool is sharded along the batch axis with
@@ -102,6 +103,21 @@ def _advance(scene, opts, update, controls, params, y, state, reset, q_reset, ac
     return jax.vmap(one)(controls, params, y, state, reset, q_reset, active)
 
 
+#: Solver slots per CPU device. On XLA:CPU a row-step costs about the same in a pool of 128 as in
+#: one of 1,000 (1.5 and 1.25 ms, the paper's robot with PAC), and a smaller pool is refilled
+#: sooner, so 1,000 rows in a pool of 128 ran at 46 eq/s against 31 in one pool of 1,000.
+CPU_POOL_SLOTS = 128
+
+
+def _pool_slots(chunk: int, n_devices: int) -> int:
+    """Slots of the solver pool: the chunk, capped per device on CPU (accelerators keep the
+    whole chunk: their rows run in parallel); a multiple of the device count."""
+    slots = chunk
+    if jax.default_backend() == "cpu":
+        slots = min(slots, CPU_POOL_SLOTS * n_devices)
+    return -(-slots // n_devices) * n_devices
+
+
 def _initial_state(scene, opts, size, dtype, sharding):
     """Placeholder ``(y, state)`` of a pool of ``size`` slots (every slot is reset first)."""
     n = scene.n_dofs
@@ -195,11 +211,11 @@ def iter_batch(
     if not 1 <= n_devices <= len(jax.local_devices()):
         raise ValueError(f"devices must be in 1..{len(jax.local_devices())}, got {devices}")
     chunk = max(1, min(chunk_size, n))
-    chunk = -(-chunk // n_devices) * n_devices  # a multiple of the device count
+    slots = _pool_slots(chunk, n_devices)
     sharding = _sharding(n_devices)
 
     starts = _Starts(scene.n_dofs, q0, warm_start, chunk)
-    pool = _pool_solve(scene, controls_batch, starts, params, update, opts, chunk, dtype, sharding)
+    pool = _pool_solve(scene, controls_batch, starts, params, update, opts, slots, dtype, sharding)
     buffers: dict[int, _ChunkBuffer] = {}
     next_chunk = 0
     for rows, q_start, eq_rows in pool:
@@ -383,8 +399,8 @@ def solve_batch(
         q0: starting configuration(s), (n_dofs,) or (batch, n_dofs); default straight.
         params: optional pytree of per-row values (leading axis ``batch``), e.g. payload masses,
             applied to the scene by ``update(scene, row) -> scene`` (use ``eqx.tree_at``).
-        chunk_size: slots of the solver pool (rows solved at once) and rows per output chunk;
-            memory is bounded by it.
+        chunk_size: rows per output chunk, and slots of the solver pool (rows solved at once;
+            on CPU at most :data:`CPU_POOL_SLOTS` per device); memory is bounded by it.
         warm_start: start each row from the equilibrium of the nearest command solved so far
             (the first ``chunk_size`` rows start straight; helps on grids and paths).
         devices: number of devices to shard each chunk over (default all).
