@@ -369,7 +369,10 @@ def _retry_failed(scene, u, q, p, update, opts, eq, dtype):
     bad = np.flatnonzero(~np.asarray(eq.converged))
     flow = dataclasses.replace(opts, method="flow")
     pb = None if p is None else jtu.tree_map(lambda x: x[bad], p)
-    retry = _run_chunk(scene, u[bad], q[bad], pb, update, flow, len(bad), dtype, None)
+    # Padded to a power of two: a batch with a varying number of failures compiles the flow
+    # solver a few times, not once per count.
+    size = 1 << (len(bad) - 1).bit_length()
+    retry = _run_chunk(scene, u[bad], q[bad], pb, update, flow, size, dtype, None)
     better = np.asarray(retry.converged)
     rows = bad[better]
     if rows.size == 0:
