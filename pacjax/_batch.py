@@ -30,6 +30,7 @@ from ._equilibrium import (
     as_traced_leaves,
     check_controls,
     check_start_contraction,
+    conservative_part,
     equilibrium_from,
     make_solver,
     max_total_steps,
@@ -49,9 +50,11 @@ _TAGS = frozenset()
 
 
 @eqx.filter_jit
-def _solve_chunk(scene, controls, q0, opts, params, update):
+def _solve_chunk(scene, controls, q0, opts, params, update, conservative=False):
     def one(u, q, p):
         sc = scene if update is None else update(scene, p)
+        if conservative:
+            sc = conservative_part(sc)
         return solve_core(sc, u, q, opts)
 
     return jax.vmap(one)(controls, q0, params)
@@ -349,7 +352,7 @@ def _pad(x, size):
     return np.concatenate([x, pad])
 
 
-def _run_chunk(scene, u, q, p, update, opts, chunk, dtype, sharding):
+def _run_chunk(scene, u, q, p, update, opts, chunk, dtype, sharding, conservative=False):
     m = u.shape[0]
     u_pad = jnp.asarray(_pad(u, chunk), dtype)
     q_pad = jnp.asarray(_pad(q, chunk), dtype)
@@ -360,24 +363,39 @@ def _run_chunk(scene, u, q, p, update, opts, chunk, dtype, sharding):
             p_pad = jax.device_put(p_pad, sharding)
     if p_pad is None:
         p_pad = jnp.zeros((chunk,), dtype)
-    eq = _solve_chunk(scene, u_pad, q_pad, opts, p_pad, update)
+    eq = _solve_chunk(scene, u_pad, q_pad, opts, p_pad, update, conservative)
     return jtu.tree_map(lambda x: x[:m], eq)
 
 
 def _retry_failed(scene, u, q, p, update, opts, eq, dtype):
-    """Re-solve the rows that failed with the diffrax flow, keeping whichever converged."""
+    """Re-solve the rows that failed, keeping whichever converged: for a non-conservative scene
+    first by load continuation (from the equilibrium of its conservative part, see
+    :func:`pacjax._equilibrium.conservative_part`), then with the diffrax flow."""
+
+    def solve_rows(rows, starts, options, conservative=False):
+        pb = None if p is None else jtu.tree_map(lambda x: x[rows], p)
+        # Padded to a power of two: a batch with a varying number of failures compiles the
+        # retry a few times, not once per count.
+        size = 1 << (len(rows) - 1).bit_length()
+        return _run_chunk(
+            scene, u[rows], starts, pb, update, options, size, dtype, None, conservative
+        )
+
+    def merge(eq, rows, retry):
+        better = np.asarray(retry.converged)
+        if not better.any():
+            return eq
+        return jtu.tree_map(lambda a, b: a.at[rows[better]].set(b[better]), eq, retry)
+
+    if not scene.is_conservative:
+        bad = np.flatnonzero(~np.asarray(eq.converged))
+        start = solve_rows(bad, q[bad], opts, conservative=True)
+        retry = solve_rows(bad, np.asarray(start.q), opts)
+        eq = merge(eq, bad, eqx.tree_at(lambda e: e.steps, retry, retry.steps + start.steps))
     bad = np.flatnonzero(~np.asarray(eq.converged))
-    flow = dataclasses.replace(opts, method="flow")
-    pb = None if p is None else jtu.tree_map(lambda x: x[bad], p)
-    # Padded to a power of two: a batch with a varying number of failures compiles the flow
-    # solver a few times, not once per count.
-    size = 1 << (len(bad) - 1).bit_length()
-    retry = _run_chunk(scene, u[bad], q[bad], pb, update, flow, size, dtype, None)
-    better = np.asarray(retry.converged)
-    rows = bad[better]
-    if rows.size == 0:
-        return eq
-    return jtu.tree_map(lambda a, b: a.at[rows].set(b[better]), eq, retry)
+    if bad.size:
+        eq = merge(eq, bad, solve_rows(bad, q[bad], dataclasses.replace(opts, method="flow")))
+    return eq
 
 
 def solve_batch(
