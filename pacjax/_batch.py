@@ -223,7 +223,7 @@ def iter_batch(
     next_chunk = 0
     for rows, q_start, eq_rows in pool:
         starts.record(controls_batch[rows], eq_rows)
-        for c in np.unique(rows // chunk):
+        for c in (int(k) for k in np.unique(rows // chunk)):
             if c not in buffers:
                 lo = c * chunk
                 buffers[c] = _ChunkBuffer(slice(lo, min(lo + chunk, n)), eq_rows)

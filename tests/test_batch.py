@@ -61,6 +61,7 @@ def test_pool_refills_slots_and_yields_chunks_in_order(scene):
     commands[[0, 4]] = 0.0  # straight: done in a couple of steps
     parts = list(pj.iter_batch(scene, commands, chunk_size=3))
     assert [(rows.start, rows.stop) for rows, _ in parts] == [(0, 3), (3, 6), (6, 7)]
+    assert all(type(rows.start) is int and type(rows.stop) is int for rows, _ in parts)
     steps = np.concatenate([np.asarray(eq.steps) for _, eq in parts])
     assert steps.min() < steps.max()  # the rows did finish at different rounds
     for rows, eq in parts:

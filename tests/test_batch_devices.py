@@ -30,12 +30,22 @@ scene = pj.Scene(
     loads=(pj.Gravity(direction=(1.0, 0.0, 0.0)), pj.PointMass(0.1, 0)),
 )
 commands = np.random.default_rng(0).uniform(0.0, 0.01, (6, 3))
+# Record over how many devices the solver pool's state lives, round after round.
+import pacjax._batch as batch_module
+pool_devices = []
+advance = batch_module._advance
+def spy(*args):
+    out = advance(*args)
+    pool_devices.append(len(out[0].devices()))
+    return out
+batch_module._advance = spy
 two = pj.solve_batch(scene, commands, chunk_size=4)             # default: every device
+two_devices = list(pool_devices)
 one = pj.solve_batch(scene, commands, chunk_size=4, devices=1)
 rows, first = next(pj.iter_batch(scene, commands, chunk_size=4))
 print(json.dumps({
     "n_devices": len(jax.devices()),
-    "chunk_devices": len(first.q.devices()),
+    "pool_devices": sorted(set(two_devices)),
     "chunk_rows": rows.stop - rows.start,
     "two": np.asarray(two.q).tolist(),
     "one": np.asarray(one.q).tolist(),
@@ -59,7 +69,7 @@ def test_solve_batch_on_two_cpu_devices_matches_one_device():
     assert proc.returncode == 0, proc.stderr[-3000:]
     out = json.loads(proc.stdout.strip().splitlines()[-1])
     assert out["n_devices"] == 2
-    # A chunk of 4 rows is split over both devices (2 rows each).
-    assert out["chunk_rows"] == 4 and out["chunk_devices"] == 2
+    # A pool of 4 slots is split over both devices (2 rows each) in every round.
+    assert out["chunk_rows"] == 4 and out["pool_devices"] == [2]
     assert all(out["converged_two"]) and all(out["converged_one"])
     np.testing.assert_allclose(out["two"], out["one"], rtol=0, atol=1e-12)
