@@ -109,8 +109,11 @@ def _tip_loss(params, q0):
 @pytest.fixture(scope="module")
 def reference():
     """The equilibrium at the base parameters, and central differences of ``q`` and the loss."""
+    # Solved through pj.solve_equilibrium, as the gradients below are: the same kinematics
+    # (known load sites are knots; under an outer jit a traced site takes a quadrature that
+    # agrees to ~1e-9, which moved the gain's finite difference by 1e-6 relative).
     scene, controls = _build(BASE_PARAMS)
-    eq = _solve(scene, controls, scene.zeros())
+    eq = pj.solve_equilibrium(scene, controls, scene.zeros(), **OPTIONS)
     assert bool(eq.converged) and bool(eq.stable)
     assert float(eq.residual_norm) <= TOL
     tensions = np.asarray(pj.tendon_tensions(scene, eq.q, controls))
@@ -128,7 +131,8 @@ def reference():
                 shifted[i] += sign * h
                 params = dict(BASE_PARAMS, **{name: _f64(shifted)})
                 s_scene, s_controls = _build(params)
-                s_eq = _solve(s_scene, s_controls, eq.q)  # warm start: the same branch
+                # Warm start: the same branch.
+                s_eq = pj.solve_equilibrium(s_scene, s_controls, eq.q, **OPTIONS)
                 assert bool(s_eq.converged)
                 q = np.asarray(s_eq.q)
                 values.append((q, float(_tip(s_scene, s_eq.q) @ TIP_WEIGHTS)))
@@ -207,7 +211,10 @@ def test_jit_vmap_agree_with_single_solves_and_compile_once(reference):
             np.testing.assert_allclose(batch.q[k], single.q, rtol=1e-9, atol=1e-12)
             np.testing.assert_allclose(batch.stable[k], single.stable)
         if params is BASE_PARAMS:
-            np.testing.assert_allclose(batch.q[0], eq.q, rtol=1e-9, atol=1e-12)
+            # The reference was solved outside jit, with the load sites as knots; here they are
+            # traced (another quadrature): the two discretisations agree to ~1e-9 in position,
+            # 4e-7 relative in these soft coordinates.
+            np.testing.assert_allclose(batch.q[0], eq.q, rtol=1e-6, atol=1e-12)
 
 
 def test_non_finite_controls_inside_jit_are_reported_not_converged():

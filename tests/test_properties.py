@@ -98,8 +98,13 @@ def _residuals_jit(scene, q, controls):
     return force, force / (d * scene.coordinate_scale(q.dtype))
 
 
-@eqx.filter_jit
 def _energies(scene, qs, controls):
+    """Potential energies at ``qs`` with the solver's kinematics (see :func:`_residuals`)."""
+    return _energies_jit(static_load_sites(scene), qs, controls)
+
+
+@eqx.filter_jit
+def _energies_jit(scene, qs, controls):
     return jax.vmap(lambda q: scene.potential_energy(q, controls))(qs)
 
 
