@@ -32,6 +32,7 @@ from ._equilibrium import (
     check_start_contraction,
     conservative_part,
     equilibrium_from,
+    load_continuation,
     make_solver,
     max_total_steps,
     solve_core,
@@ -389,9 +390,8 @@ def _retry_failed(scene, u, q, p, update, opts, eq, dtype):
 
     if not scene.is_conservative:
         bad = np.flatnonzero(~np.asarray(eq.converged))
-        start = solve_rows(bad, q[bad], opts, conservative=True)
-        retry = solve_rows(bad, np.asarray(start.q), opts)
-        eq = merge(eq, bad, eqx.tree_at(lambda e: e.steps, retry, retry.steps + start.steps))
+        retry = load_continuation(lambda cons, start: solve_rows(bad, start, opts, cons), q[bad])
+        eq = merge(eq, bad, retry)
     bad = np.flatnonzero(~np.asarray(eq.converged))
     if bad.size:
         eq = merge(eq, bad, solve_rows(bad, q[bad], dataclasses.replace(opts, method="flow")))

@@ -386,7 +386,12 @@ def solve_equilibrium(
     eq = _solve(scene, controls, q0, opts)
     if fallback and opts.method == "ptc" and not _is_traced(eq.converged):
         if not bool(np.all(eq.converged)) and not scene.is_conservative:
-            eq = _keep_better(eq, _solve_from_conservative(_solve, scene, controls, q0, opts))
+
+            def solve(conservative, start):
+                sc = conservative_part(scene) if conservative else scene
+                return _solve(sc, controls, start, opts)
+
+            eq = _keep_better(eq, load_continuation(solve, q0))
         if not bool(np.all(eq.converged)):
             eq = _keep_better(
                 eq, _solve(scene, controls, q0, dataclasses.replace(opts, method="flow"))
@@ -415,11 +420,12 @@ def conservative_part(scene: Scene) -> Scene:
     return eqx.tree_at(lambda sc: sc.loads, scene, kept)
 
 
-def _solve_from_conservative(solve, scene, controls, q0, opts) -> Equilibrium:
-    """Load continuation for a non-conservative scene: its conservative part first, then the
-    full loads from that equilibrium (steps of both counted)."""
-    start = solve(conservative_part(scene), controls, q0, opts)
-    eq = solve(scene, controls, start.q, opts)
+def load_continuation(solve, q0) -> Equilibrium:
+    """Load continuation for a non-conservative scene: ``solve(True, q0)`` solves its
+    conservative part, ``solve(False, start)`` the full loads from that equilibrium (steps of
+    both counted). Single solves and batch retries pass their own ``solve``."""
+    start = solve(True, q0)
+    eq = solve(False, np.asarray(start.q))
     return eqx.tree_at(lambda e: e.steps, eq, eq.steps + start.steps)
 
 
