@@ -31,6 +31,7 @@ import numpy as np
 import optimistix as optx
 
 from ._hessian import energy_derivatives
+from ._loads import PointForce, PointMoment
 from ._ptc import PseudoTransientContinuation, final_code, max_abs
 from ._robot import concrete
 from ._scene import Scene, SceneConstants
@@ -409,7 +410,6 @@ def conservative_part(scene: Scene) -> Scene:
     residual ~0.1; from the equilibrium without the force, 10 steps). In a batch, apply it after
     the per-row ``update``: load indices change.
     """
-    from ._loads import PointForce, PointMoment
 
     def conservative(load):
         return not (
