@@ -345,19 +345,26 @@ def bench(
         scene=scene,
         scene_label=label,
         log=lambda text: click.echo(text, err=True),
+        save=lambda record: _write_bench(record, json_path, md_path),
     )
     try:
         record = benchmod.run(**options)
     except (ValueError, TypeError) as err:
         raise click.ClickException(str(err)) from None
-    text = benchmod.to_markdown(record)
-    click.echo(text)
+    click.echo(benchmod.to_markdown(record))
+    for path in (json_path, md_path):
+        if path:
+            click.echo(f"wrote {path}")
+
+
+def _write_bench(record, json_path, md_path):
+    """Write the benchmark record so far (after every measurement: a stopped run keeps it)."""
+    from . import bench as benchmod
+
     if json_path:
         with open(json_path, "w", encoding="utf-8") as f:
             json.dump(record, f, indent=2)
             f.write("\n")
-        click.echo(f"wrote {json_path}")
     if md_path:
         with open(md_path, "w", encoding="utf-8") as f:
-            f.write(text)
-        click.echo(f"wrote {md_path}")
+            f.write(benchmod.to_markdown(record))

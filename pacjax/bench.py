@@ -245,8 +245,12 @@ def run(
     scene: pj.Scene | None = None,
     scene_label: str | None = None,
     log=print,
+    save=None,
 ) -> dict:
     """The full benchmark; returns the JSON-ready record (see :func:`to_markdown`).
+
+    ``save(record)``, when given, is called after every measurement with the record so far, so a
+    long run that is stopped (a time limit, a crash in a later stage) keeps what it measured.
 
     By default the paper's robot with each of ``models``; with ``scene`` (float64) that scene
     alone, labelled ``scene_label`` (``models`` and ``baseline_models`` are then ignored and the
@@ -309,6 +313,12 @@ def run(
         "gradients": {},
         "float32_vs_float64": {},
     }
+
+    def checkpoint():
+        _ratios(record)
+        if save is not None:
+            save(record)
+
     for model, make in scenes.items():
         tips = {}
         for dtype in dtypes:
@@ -322,6 +332,7 @@ def run(
                     f"  {row['equilibria_per_s']:.1f} eq/s, compile {row['compile_s']:.1f} s, "
                     f"converged {row['converged']:.1%}"
                 )
+                checkpoint()
                 if batch == max(batches):
                     tips[dtype] = (np.asarray(eq.q, np.float64), np.asarray(eq.converged))
         if "float64" in tips and "float32" in tips:
@@ -340,26 +351,33 @@ def run(
                 "max_tip_difference_m": float(diff[both].max()) if both.any() else None,
                 "median_tip_difference_m": float(np.median(diff[both])) if both.any() else None,
             }
+            checkpoint()
     for model, sc in base_scenes.items():
         log(f"{model} float64 plain-flow baseline, batch {baseline_batch} ...")
         base, _ = bench_flow_baseline(sc, commands[:baseline_batch], TOLERANCES["float64"])
         record["baselines"][model] = base
+        checkpoint()
         log(
             f"  {base['equilibria_per_s']:.2f} eq/s, compile {base['compile_s']:.1f} s, "
             f"converged {base['converged']:.1%}"
-        )
-    for row in record["results"]:
-        base = record["baselines"].get(row["model"])
-        row["vs_flow_baseline"] = (
-            row["equilibria_per_s"] / base["equilibria_per_s"] if base else None
         )
     if grad_batch:
         for model, make in scenes.items():
             log(f"{model} float64 gradient through a batch of {grad_batch} ...")
             g = bench_gradient(make("float64"), commands[:grad_batch], TOLERANCES["float64"])
             record["gradients"][model] = g
+            checkpoint()
             log(f"  gradient / forward = {g['gradient_over_forward']:.2f}")
     return record
+
+
+def _ratios(record: dict) -> None:
+    """Each result's rate over its model's plain-flow baseline (None without one)."""
+    for row in record["results"]:
+        base = record["baselines"].get(row["model"])
+        row["vs_flow_baseline"] = (
+            row["equilibria_per_s"] / base["equilibria_per_s"] if base else None
+        )
 
 
 def to_markdown(record: dict) -> str:
