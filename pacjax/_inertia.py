@@ -38,6 +38,7 @@ from jaxtyping import Array, Float
 
 from ._loads import PointMass
 from ._quadrature import gauss_legendre
+from ._robot import concrete
 from ._scene import Scene
 from ._strain import _PlanarCurvature
 
@@ -75,18 +76,33 @@ def inertia_sites(scene: Scene, dtype) -> list:
     """
     segs, s, masses, radius = _body_nodes(scene, dtype)
     moments = masses[:, None] * radius[:, None] ** 2 * jnp.asarray(_DISC, dtype)
-    groups = [(segs, s, masses, moments)]
     point_masses = scene._of(PointMass)
-    if point_masses:
-        groups.append(
+    if not point_masses:
+        return [(segs, s, masses, moments)]
+    pm_segs = np.asarray([pm.segment for pm in point_masses])
+    pm_s = _sites([pm.s for pm in point_masses], dtype)
+    pm_masses = jnp.stack([pm.mass for pm in point_masses]).astype(dtype)
+    if isinstance(pm_s, np.ndarray):
+        # Known sites join the body's nodes: one kinematics pass for all of them (a point mass
+        # has no rotational inertia).
+        return [
             (
-                np.asarray([pm.segment for pm in point_masses]),
-                jnp.stack([pm.s for pm in point_masses]).astype(dtype),
-                jnp.stack([pm.mass for pm in point_masses]).astype(dtype),
-                None,
+                np.concatenate([segs, pm_segs]),
+                np.concatenate([s, pm_s]),
+                jnp.concatenate([masses, pm_masses]),
+                jnp.concatenate([moments, jnp.zeros((len(point_masses), 3), dtype)]),
             )
-        )
-    return groups
+        ]
+    return [(segs, s, masses, moments), (pm_segs, pm_s, pm_masses, None)]
+
+
+def _sites(values, dtype):
+    """Point sites ``s``: a numpy array when every one is known now (the kinematics' knot path;
+    a ``jnp`` op inside ``jit`` would make them traced), else a traced array."""
+    known = [None if isinstance(v, jax.core.Tracer) else concrete(v) for v in values]
+    if all(k is not None and k.shape == () for k in known):
+        return np.asarray([float(k) for k in known])
+    return jnp.stack(values).astype(dtype)
 
 
 def coordinate_inertia(

@@ -8,7 +8,8 @@ solution; a step that raises the merit (the energy for conservative scenes, ``|r
 is rejected and ``dt`` shrinks until the step is a short stretch of the flow, which is a descent
 direction whatever the curvature. A converged saddle (smallest eigenvalue of the scaled stiffness
 below ``-stability_tol``) is left along its negative-curvature direction, a bounded number of
-times.
+times, and the continuation then goes on until the stiffness is positive again (a residual below
+the tolerance next to the saddle is not convergence).
 
 Written as an ``optimistix.AbstractRootFinder`` so that ``optimistix.root_find`` runs the loop and
 provides the implicit-function-theorem adjoint: the Hessian graph is traced once.
@@ -38,6 +39,9 @@ class PTCState(eqx.Module):
     dt: Float[Array, ""]
     step: Int[Array, ""]
     escapes: Int[Array, ""]
+    # Set by an escape, cleared once the stiffness is no longer indefinite: until then a small
+    # residual is not convergence (see ``terminate``).
+    escaping: Bool[Array, ""]
     eig: Float[Array, ""]
     eigvals: Float[Array, " n"]
     eigvecs: Float[Array, "n n"]
@@ -93,6 +97,7 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
             dt=jnp.asarray(self.initial_dt, dtype),
             step=jnp.asarray(0),
             escapes=jnp.asarray(0),
+            escaping=jnp.asarray(False),
             eig=jnp.asarray(0.0, dtype),
             eigvals=jnp.ones(n, dtype),
             eigvecs=jnp.eye(n, dtype=dtype),
@@ -214,6 +219,7 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
             dt=dt,
             step=state.step + 1,
             escapes=state.escapes + escape.astype(state.escapes.dtype),
+            escaping=(escape | state.escaping) & (eig < -self.stability_tol),
             eig=eig,
             eigvals=eigvals,
             eigvecs=eigvecs,
@@ -224,7 +230,12 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
 
     def terminate(self, fn, y, args, options, state: PTCState, tags):
         del fn, y, args, options, tags
-        done = self._converged(state.residual) & ~self._wants_escape(state)
+        # After an escape the iterate is still near the saddle, and at a loose tolerance its
+        # residual can already be below it (float32 at 1e-4: a saddle with eigenvalue -3e-4
+        # left by 0.05 has a residual ~1.5e-5). It must first reach a stable point: the
+        # saddle-free steps move it away from the saddle geometrically, and the energy, which
+        # the escape lowered below the saddle's, cannot bring it back.
+        done = self._converged(state.residual) & ~self._wants_escape(state) & ~state.escaping
         failed = state.code != SUCCESS
         result = optx.RESULTS.where(
             failed, optx.RESULTS.nonlinear_divergence, optx.RESULTS.successful

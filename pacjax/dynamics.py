@@ -36,7 +36,13 @@ import lineax as lx
 import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
-from ._equilibrium import as_traced_leaves, check_controls, check_q, solver_dtype
+from ._equilibrium import (
+    as_traced_leaves,
+    check_controls,
+    check_q,
+    solver_dtype,
+    static_load_sites,
+)
 from ._inertia import (
     PHI_INERTIA_FACTOR,
     body_dynamics,
@@ -397,7 +403,9 @@ def simulate(
         raise ValueError(f"max_steps must be >= 1, got {max_steps}")
     if not phi_inertia >= 0:
         raise ValueError(f"phi_inertia must be >= 0, got {phi_inertia}")
-    scene = as_traced_leaves(scene, dtype)
+    # Known point-mass sites become knots of the kinematics (as in the statics): a traced site
+    # integrates its own frame in every kinematics pass, and the vector field has several.
+    scene = static_load_sites(as_traced_leaves(scene, dtype))
     if damping is None:
         damping = Damping.modal(scene)
     elif not isinstance(damping, Damping):

@@ -91,7 +91,8 @@ def tip_frobenius(scene, report, truth_rot):
     return np.asarray(out)
 
 
-def run(n_frames: int, seed: int = 0):
+def run(n_frames: int, seed: int = 0, save=None):
+    """Every case, both models; ``save(results)`` after every fit (a cut run keeps its rows)."""
     rng = np.random.default_rng(seed)
     results = []
     for name, kwargs, payloads, force in cases():
@@ -167,6 +168,8 @@ def run(n_frames: int, seed: int = 0):
                 f"Frobenius {np.mean(frob):.4f}, fit {wall:.0f} s",
                 flush=True,
             )
+            if save is not None:
+                save(results + [row])
         results.append(row)
     return results
 
@@ -209,8 +212,9 @@ def write(results, out, n_frames, total_s):
             (axes[0], "tip_error_mm", "tip position error (mm)"),
             (axes[1], "tip_frobenius", "tip orientation error (Frobenius)"),
         ):
-            mean = [r["models"][m][f"{key}_mean"] for r in results]
-            std = [r["models"][m][f"{key}_std"] for r in results]
+            nan = {f"{key}_mean": np.nan, f"{key}_std": np.nan}
+            mean = [r["models"].get(m, nan)[f"{key}_mean"] for r in results]
+            std = [r["models"].get(m, nan)[f"{key}_std"] for r in results]
             ax.bar(x + (k - 0.5) * 0.38, mean, 0.38, yerr=std, color=col, label=m, capsize=3)
             ax.set_ylabel(label)
     for ax in axes:
@@ -233,8 +237,11 @@ def main():
     jax.config.update("jax_compilation_cache_dir", cache)
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
     t0 = time.perf_counter()
-    results = run(args.frames, args.seed)
-    write(results, args.out, args.frames, time.perf_counter() - t0)
+
+    def save(results):
+        write(results, args.out, args.frames, time.perf_counter() - t0)
+
+    run(args.frames, args.seed, save)
 
 
 if __name__ == "__main__":
