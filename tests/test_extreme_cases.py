@@ -300,3 +300,29 @@ def test_follower_force_is_reached_by_load_continuation():
         residual = scene.residual(single.q, jnp.asarray(u))
         scale = scene.elastic_stiffness_diagonal() * scene.coordinate_scale()
         assert float(jnp.max(jnp.abs(residual / scale))) < 1e-9
+
+
+def test_float32_escape_from_a_saddle_ends_at_the_stable_equilibrium():
+    # Paper robot, PAC, 200 g, float32 at 1e-4: these commands (rows 2703 and 2955 of the
+    # benchmark's 10,000) passed next to a saddle on the way. The residual there was below
+    # 1e-4 and stayed below it after each escape of 0.05 (eigenvalue -3e-4, -7e-4), so the solve
+    # stopped on the saddle, 8.4 and 14.7 mm from the float64 equilibrium. An escape now ends
+    # only at a stable point.
+    commands = np.array(
+        [
+            [0.00382077, 0.00371182, 0.01370315, 0.00210011, 0.00956628, 0.00972605,
+             0.00945753, 0.00340062, 0.01977966],
+            [0.00437140, 0.00848895, 0.00837125, 0.00081945, 0.01078047, 0.00894051,
+             0.01455323, 0.01994017, 0.00520955],
+        ]
+    )  # fmt: skip
+    scene = pj.presets.stella2023(pj.PAC(), tip_mass=0.2)
+    scene32 = pj.astype(scene, jnp.float32)
+    for u in commands:
+        eq32 = pj.solve_equilibrium(scene32, jnp.asarray(u, jnp.float32), tol=1e-4)
+        eq64 = pj.solve_equilibrium(scene, u)
+        assert bool(eq32.converged) and bool(eq32.stable)
+        assert bool(eq64.converged) and bool(eq64.stable)
+        tip32 = pj.tip_pose(scene, jnp.asarray(eq32.q, jnp.float64))[0]
+        tip64 = pj.tip_pose(scene, eq64.q)[0]
+        assert float(jnp.linalg.norm(tip32 - tip64)) < 1e-4  # m
