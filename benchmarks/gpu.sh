@@ -9,9 +9,10 @@
 # that sees the GPU. Writes into $OUT (the Markdown tables into $MD_DIR, default $OUT):
 # machine.txt, bench_pac.{json,md} (PAC float64 and float32 at batch 10,000, the gradient
 # through a batch), bench_models.{json,md} (PCC and PolynomialCurvature(3)),
-# bench_baseline.{json,md} (PAC at batch 1,000 against the plain damped flow), with STAGE_BATCH_N > 0 batch_run.json (the summary of one
-# `pacjax batch` run of that many rows: rate, peak memory) and log.txt. Each stage's time limit
-# and size can be set from the environment (the names below).
+# bench_baseline.{json,md} (PAC at batch 1,000 against the plain damped flow), with
+# STAGE_BATCH_N > 0 batch_run.json (the summary of one `pacjax batch` run of that many rows:
+# rate, peak memory), and log.txt. Each stage's time limit and size can be set from the
+# environment (the names below). benchmarks/RESULTS.md has what it measured on an H100.
 set -u
 OUT=${OUT:-bench-gpu}
 mkdir -p "$OUT"
