@@ -99,9 +99,9 @@ def inertia_sites(scene: Scene, dtype) -> list:
 def _sites(values, dtype):
     """Point sites ``s``: a numpy array when every one is known now (the kinematics' knot path;
     a ``jnp`` op inside ``jit`` would make them traced), else a traced array."""
-    known = [None if isinstance(v, jax.core.Tracer) else concrete(v) for v in values]
-    if all(k is not None and k.shape == () for k in known):
-        return np.asarray([float(k) for k in known])
+    known = concrete(values)  # None when any of them is traced
+    if known is not None and known.shape == (len(values),):
+        return known
     return jnp.stack(values).astype(dtype)
 
 
