@@ -95,7 +95,11 @@ def local_frame(
     # The frame at s and at the quadrature nodes of [0, s] in one vmapped evaluation, so the
     # rotation is traced once (compile time scales with the size of the traced graph).
     where = jnp.concatenate([s * jnp.asarray(nodes, q.dtype), s[None]])
-    rots = jax.vmap(lambda v: local_rotation(model, q, v, config.rotation_substeps))(where)
+    closed = model.plane_frames(q, where)
+    if closed is not None:
+        rots = closed[0]
+    else:
+        rots = jax.vmap(lambda v: local_rotation(model, q, v, config.rotation_substeps))(where)
     tangents = rots[:-1, :, 2]
     w = jnp.asarray(weights, q.dtype)
     position = (length + model.elongation(q)) * s * jnp.sum(w[:, None] * tangents, axis=0)
@@ -131,6 +135,26 @@ def grid_frames(
     return world_rot, world_pos
 
 
+def _runs(flat_index: np.ndarray) -> tuple[tuple[int, int], ...]:
+    """``flat_index`` as runs ``(start, stop)`` of consecutive indices."""
+    runs: list[list[int]] = []
+    for i in np.asarray(flat_index, np.int64).tolist():
+        if runs and runs[-1][1] == i:
+            runs[-1][1] = i + 1
+        else:
+            runs.append([i, i + 1])
+    return tuple((a, b) for a, b in runs)
+
+
+def _take_runs(grid_values: Array, runs) -> Array:
+    """Rows ``runs`` of the flattened ``(segments, width, ...)`` grid, as a concatenation of
+    static slices. A gather would become a scatter under reverse mode (serial on XLA:CPU, and it
+    does not batch), and a one-hot product costs points x grid multiplications per value (it
+    dominated the Hessian of the paper's robot)."""
+    flat = grid_values.reshape((-1,) + grid_values.shape[2:])
+    return jnp.concatenate([flat[a:b] for a, b in runs])
+
+
 class PointLayout:
     """Static placement of a list of points ``(segment, s)`` on a padded per-segment grid.
 
@@ -149,9 +173,7 @@ class PointLayout:
         self.width = max(max(counts), 1)
         self.segments = np.asarray([int(k) for k in segments], np.int64)
         self.flat_index = self.segments * self.width + np.asarray(flat, np.int64)
-        selector = np.zeros((len(flat), n_segments * self.width))
-        selector[np.arange(len(flat)), self.flat_index] = 1.0
-        self.selector = selector
+        self.runs = _runs(self.flat_index)
 
     def grid(self, s: Float[Array, " p"], dtype) -> Float[Array, "n w"]:
         """The padded ``(segments, width)`` grid of ``s`` values (padding at ``s = 1``)."""
@@ -161,10 +183,7 @@ class PointLayout:
 
     def select(self, grid_values: Array) -> Array:
         """Values at the listed points from values on the grid."""
-        rest = grid_values.shape[2:]
-        flat = grid_values.reshape(self.n_segments * self.width, -1)
-        picked = jnp.asarray(self.selector, flat.dtype) @ flat
-        return picked.reshape((self.selector.shape[0],) + rest)
+        return _take_runs(grid_values, self.runs)
 
 
 def chain_segments(
@@ -217,17 +236,11 @@ class Knots:
         nodes, _ = gauss_legendre(_INTERVAL_NODES)
         lo = self.s[:, :-1, None]
         self.node_s = lo + (self.s[:, 1:, None] - lo) * nodes  # (n, intervals, nodes)
-        selector = np.zeros((len(s), n_segments * self.width))
-        selector[np.arange(len(s)), index] = 1.0
-        self.selector = selector
+        self.runs = _runs(index)
 
     def select(self, grid_values: Array) -> Array:
-        """Values at the requested points from values on the knot grid (a constant one-hot
-        product: a gather would become a scatter under reverse mode)."""
-        rest = grid_values.shape[2:]
-        flat = grid_values.reshape(self.n_segments * self.width, -1)
-        picked = jnp.asarray(self.selector, flat.dtype) @ flat
-        return picked.reshape((self.selector.shape[0],) + rest)
+        """Values at the requested points from values on the knot grid."""
+        return _take_runs(grid_values, self.runs)
 
 
 def segment_knot_frames(
@@ -248,6 +261,12 @@ def segment_knot_frames(
     nodes, weights = gauss_legendre(_INTERVAL_NODES)
     nodes = jnp.asarray(nodes, dtype)
     n_int = a.shape[0]
+    closed = model.plane_frames(q, knots)
+    if closed is not None:
+        # One bending plane: closed-form frames, no Magnus steps and no chained products.
+        rots = closed[0]
+        _, tangents = model.plane_frames(q, a[:, None] + h[:, None] * nodes[None, :])
+        return _knot_positions(model, q, length, h, weights, rots, tangents, node_weights)
     # Magnus vectors of every interval and of [a, node] for every position node, in one vmap.
     starts = jnp.concatenate([a, jnp.repeat(a, len(nodes))])
     widths = jnp.concatenate([h, (h[:, None] * nodes[None, :]).reshape(-1)])
@@ -266,6 +285,13 @@ def segment_knot_frames(
     _, rest = jax.lax.scan(accumulate, first, steps)
     rots = jnp.concatenate([first[None], rest])
     tangents = jnp.einsum("kij,knj->kni", rots[:-1], node_dirs)
+    return _knot_positions(model, q, length, h, weights, rots, tangents, node_weights)
+
+
+def _knot_positions(model, q, length, h, weights, rots, tangents, node_weights):
+    """Knot positions (and the weighted tangent integral) from the tangents at the position
+    nodes of every interval (``(intervals, nodes, 3)``)."""
+    dtype = q.dtype
     w = jnp.asarray(weights, dtype)
     scale = (length + model.elongation(q)) * h
     steps_pos = scale[:, None] * jnp.einsum("n,kni->ki", w, tangents)

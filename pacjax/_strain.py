@@ -73,6 +73,14 @@ class StrainModel(eqx.Module):
         """Magnus sub-steps per segment that integrate this model's rotation exactly (or well)."""
         return 1
 
+    def plane_frames(
+        self, q: Float[Array, " d"], s: Float[Array, "*p"]
+    ) -> tuple[Float[Array, "*p 3 3"], Float[Array, "*p 3"]] | None:
+        """Closed-form rotations (base rotation included) and tangents ``R e_z`` at the points
+        ``s``, for models whose segments bend in one fixed plane; None for the others, which
+        the kinematics integrates with the Magnus method."""
+        return None
+
     def bending_vector(self, q: Float[Array, " d"], s: Float[Array, ""]) -> Float[Array, "2"]:
         """``(k_x, k_y)``: curvature per unit ``s`` towards the cross-section's x and y axes."""
         u = self.strain(q, s)
@@ -110,6 +118,32 @@ class _PlanarCurvature(StrainModel):
 
     @abc.abstractmethod
     def _curvature(self, q: Float[Array, " d"], s: Float[Array, ""]) -> Float[Array, ""]: ...
+
+    @abc.abstractmethod
+    def _angle(self, q: Float[Array, " d"], s: Float[Array, "*p"]) -> Float[Array, "*p"]:
+        """Bending angle ``theta(s) = int_0^s c(t) dt`` (rad)."""
+
+    def plane_frames(self, q, s):
+        # The strain keeps the axis (-sin phi, cos phi, 0), so the frame is a rotation by
+        # theta(s) about it: R = Rz(phi) Ry(theta) Rz(-phi), or the paper's Rz(phi) Ry(theta).
+        theta = self._angle(q, s)
+        ct, st = jnp.cos(theta), jnp.sin(theta)
+        cp, sp = jnp.cos(q[-2]), jnp.sin(q[-2])
+        zero = jnp.zeros_like(theta)
+        tangent = jnp.stack([cp * st, sp * st, ct], axis=-1)
+        if self.frame == "paper":
+            rows = [[cp * ct, -sp + zero, cp * st], [sp * ct, cp + zero, sp * st], [-st, zero, ct]]
+        else:
+            # Rz(phi) Ry(theta) Rz(-phi), with (cos theta - 1) written as -2 sin^2(theta / 2)
+            # so that it keeps its relative precision near the straight configuration.
+            vers = -2.0 * jnp.sin(0.5 * theta) ** 2
+            rows = [
+                [1.0 + cp * cp * vers, cp * sp * vers, cp * st],
+                [cp * sp * vers, 1.0 + sp * sp * vers, sp * st],
+                [-cp * st, -sp * st, ct],
+            ]
+        rot = jnp.stack([jnp.stack(r, axis=-1) for r in rows], axis=-2)
+        return rot, tangent
 
     def strain(self, q, s):
         c = self._curvature(q, s)
@@ -161,6 +195,9 @@ class PCC(_PlanarCurvature):
     def _curvature(self, q, s):
         return q[0] * jnp.ones_like(s)
 
+    def _angle(self, q, s):
+        return q[0] * s
+
 
 class PAC(_PlanarCurvature):
     """Piecewise affine curvature (the paper): ``q_i = [c0, c1, phi, dL]``, ``c(s) = c0 + c1 s``.
@@ -182,6 +219,9 @@ class PAC(_PlanarCurvature):
 
     def _curvature(self, q, s):
         return q[0] + q[1] * s
+
+    def _angle(self, q, s):
+        return s * (q[0] + 0.5 * q[1] * s)
 
 
 class PolynomialCurvature(StrainModel):
