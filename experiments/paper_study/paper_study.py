@@ -91,15 +91,25 @@ def tip_frobenius(scene, report, truth_rot):
     return np.asarray(out)
 
 
-def run(n_frames: int, seed: int = 0, save=None):
-    """Every case, both models; ``save(results)`` after every fit (a cut run keeps its rows)."""
+def run(n_frames: int, seed: int = 0, save=None, only=None, previous=()):
+    """Every case, both models; ``save(results)`` after every fit (a cut run keeps its rows).
+
+    ``only``: run the cases whose name contains it, and keep the ``previous`` rows (by case
+    name) of the others. The random draws of every case are still made in order, so a case
+    sees the same frames as in a full run.
+    """
     rng = np.random.default_rng(seed)
+    kept = {row["case"]: row for row in previous}
     results = []
     for name, kwargs, payloads, force in cases():
         truth_scene = pj.presets.stella2023(pj.PAC(), **kwargs)
         n_tendons = truth_scene.n_tendons
         u = commands(n_tendons, n_frames, rng)
         mass = np.asarray(payloads)[rng.integers(0, len(payloads), n_frames)]
+        if only is not None and only not in name:
+            if name in kept:
+                results.append(kept[name])
+            continue
         extra = {}
         if force is not None:
             extra = dict(force=np.tile([0.0, 0.0, force], (n_frames, 1)), force_follower=True)
@@ -174,17 +184,20 @@ def run(n_frames: int, seed: int = 0, save=None):
     return results
 
 
-def write(results, out, n_frames, total_s):
+def write(results, out, n_frames, total_s, only=None):
     with open(os.path.join(out, "paper_study.json"), "w") as f:
         json.dump(
-            {"frames_per_case": n_frames, "total_s": total_s, "results": results}, f, indent=2
+            {"frames_per_case": n_frames, "total_s": total_s, "only": only, "results": results},
+            f,
+            indent=2,
         )
+    scope = "" if only is None else f" for the cases matching {only!r} (other rows: earlier run)"
     lines = [
         "# Paper study on synthetic truth",
         "",
         f"{n_frames} frames per case (a quarter held out), 1 mm marker noise, 5 % dropouts, "
         "unknown mocap transform; truth: cubic curvature + stiffening. Held-out tip errors, "
-        f"mean +- std. Total {total_s:.0f} s ({jax.devices()[0].platform}).",
+        f"mean +- std. Total {total_s:.0f} s{scope} ({jax.devices()[0].platform}).",
         "",
         "| case | model | tip error (mm) | tip Frobenius | held-out RMSE (mm) | train RMSE (mm) "
         "| iterations | fit (s) | first evaluation incl. compile (s) |",
@@ -232,16 +245,28 @@ def main():
     parser.add_argument("--frames", type=int, default=24)
     parser.add_argument("--out", default=HERE)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument(
+        "--only",
+        help="Run only the cases whose name contains this text; the other cases' rows are "
+        "kept from the existing paper_study.json in --out when it has the same --frames.",
+    )
     args = parser.parse_args()
+    previous = []
+    existing = os.path.join(args.out, "paper_study.json")
+    if args.only is not None and os.path.exists(existing):
+        with open(existing) as f:
+            record = json.load(f)
+        if record["frames_per_case"] == args.frames:
+            previous = record["results"]
     cache = os.environ.get("PACJAX_CACHE_DIR", os.path.expanduser("~/.cache/pacjax-jax"))
     jax.config.update("jax_compilation_cache_dir", cache)
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
     t0 = time.perf_counter()
 
     def save(results):
-        write(results, args.out, args.frames, time.perf_counter() - t0)
+        write(results, args.out, args.frames, time.perf_counter() - t0, args.only)
 
-    run(args.frames, args.seed, save)
+    run(args.frames, args.seed, save, args.only, previous)
 
 
 if __name__ == "__main__":
