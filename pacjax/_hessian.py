@@ -18,7 +18,6 @@ import jax.numpy as jnp
 import jax.tree_util as jtu
 from jaxtyping import Array, Float
 
-from ._kinematics import segment_knot_frames
 from ._scene import Scene, SceneConstants
 
 
@@ -45,20 +44,16 @@ def energy_derivatives(
     coords = scene.coordinates(q)
     n, d = coords.shape
     dtype = q.dtype
-    lengths = scene.robot.stacked("length").astype(dtype)
-    grid = jnp.asarray(plan.knots.s, dtype)
-    weights = consts.node_mass
-
-    def segment(qi, li, ki, wi):
-        return segment_knot_frames(scene.model, qi, li, ki, wi)
+    inputs = scene._segment_inputs(plan, consts, dtype)
+    segment = scene._segment_local
 
     def value_and_jacobian(f, x):
         jac, out = jax.jacfwd(lambda y: (f(y), f(y)), has_aux=True)(x)
         return jac, out
 
     seg_jac, seg_val = jax.vmap(
-        lambda qi, li, ki, wi: value_and_jacobian(lambda y: segment(y, li, ki, wi), qi)
-    )(coords, lengths, grid, weights)
+        lambda qi, *args: value_and_jacobian(lambda y: segment(y, *args), qi)
+    )(coords, *inputs)
     traced_sites = [k for k, _ in plan.points.traced]
     traced = [
         value_and_jacobian(lambda y, k=k, s_k=s_k: scene._traced_local(y, k, s_k), coords[k])
@@ -96,10 +91,10 @@ def energy_derivatives(
     h_load = jax.hessian(psi_linear)(jnp.zeros(n * d, dtype))
 
     # lambda . d2L: per segment, along its own coordinates.
-    def curvature(qi, li, ki, wi, lam_i):
-        return jax.hessian(lambda y: pull(lam_i, segment(y, li, ki, wi)))(qi)
+    def curvature(qi, lam_i, *args):
+        return jax.hessian(lambda y: pull(lam_i, segment(y, *args)))(qi)
 
-    blocks = jax.vmap(curvature)(coords, lengths, grid, weights, lam_seg)
+    blocks = jax.vmap(curvature)(coords, lam_seg, *inputs)
     for k, s_k, lt in zip(
         traced_sites, (s for _, s in plan.points.traced), lam_traced, strict=True
     ):

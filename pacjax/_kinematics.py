@@ -135,7 +135,7 @@ def grid_frames(
     return world_rot, world_pos
 
 
-def _runs(flat_index: np.ndarray) -> tuple[tuple[int, int], ...]:
+def index_runs(flat_index: np.ndarray) -> tuple[tuple[int, int], ...]:
     """``flat_index`` as runs ``(start, stop)`` of consecutive indices."""
     runs: list[list[int]] = []
     for i in np.asarray(flat_index, np.int64).tolist():
@@ -146,7 +146,7 @@ def _runs(flat_index: np.ndarray) -> tuple[tuple[int, int], ...]:
     return tuple((a, b) for a, b in runs)
 
 
-def _take_runs(grid_values: Array, runs) -> Array:
+def take_runs(grid_values: Array, runs) -> Array:
     """Rows ``runs`` of the flattened ``(segments, width, ...)`` grid, as a concatenation of
     static slices. A gather would become a scatter under reverse mode (serial on XLA:CPU, and it
     does not batch), and a one-hot product costs points x grid multiplications per value (it
@@ -173,7 +173,7 @@ class PointLayout:
         self.width = max(max(counts), 1)
         self.segments = np.asarray([int(k) for k in segments], np.int64)
         self.flat_index = self.segments * self.width + np.asarray(flat, np.int64)
-        self.runs = _runs(self.flat_index)
+        self.runs = index_runs(self.flat_index)
 
     def grid(self, s: Float[Array, " p"], dtype) -> Float[Array, "n w"]:
         """The padded ``(segments, width)`` grid of ``s`` values (padding at ``s = 1``)."""
@@ -183,7 +183,7 @@ class PointLayout:
 
     def select(self, grid_values: Array) -> Array:
         """Values at the listed points from values on the grid."""
-        return _take_runs(grid_values, self.runs)
+        return take_runs(grid_values, self.runs)
 
 
 def chain_segments(
@@ -236,11 +236,11 @@ class Knots:
         nodes, _ = gauss_legendre(_INTERVAL_NODES)
         lo = self.s[:, :-1, None]
         self.node_s = lo + (self.s[:, 1:, None] - lo) * nodes  # (n, intervals, nodes)
-        self.runs = _runs(index)
+        self.runs = index_runs(index)
 
     def select(self, grid_values: Array) -> Array:
         """Values at the requested points from values on the knot grid."""
-        return _take_runs(grid_values, self.runs)
+        return take_runs(grid_values, self.runs)
 
 
 def segment_knot_frames(

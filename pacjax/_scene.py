@@ -19,15 +19,24 @@ from ._kinematics import (
     PointLayout,
     chain_segments,
     grid_frames,
+    index_runs,
     knot_frames,
     local_frame,
     segment_knot_frames,
+    take_runs,
 )
 from ._loads import Gravity, PointForce, PointMass, PointMoment
 from ._robot import Robot, concrete
 from ._rotation import matmul3, matvec3
 from ._strain import StrainModel
-from ._tendons import Tendon, TendonRouting, tendon_energy, tendon_tensions
+from ._tendons import (
+    LocalChords,
+    Tendon,
+    TendonRouting,
+    segment_tendon_parts,
+    tendon_energy,
+    tendon_tensions,
+)
 
 Site = tuple  # (segment, s) or (segment, s, (ox, oy, oz))
 
@@ -119,16 +128,21 @@ class _PointSet:
 
 
 class _Indexed:
-    """Frames indexed by what :class:`_PointSet` handed out (traced points come last)."""
+    """Frames indexed by what :class:`_PointSet` handed out: ``rows`` maps a static point to
+    its row of ``values``; traced points come after the ``n_static`` static ones."""
 
-    def __init__(self, values, n_static: int):
+    def __init__(self, values, rows: dict, n_static: int):
         self.values = values
+        self.rows = rows
         self.n_static = n_static
 
     def __getitem__(self, index):
         if isinstance(index, tuple):
             return self.values[self.n_static + index[1]]
-        return self.values[index]
+        if isinstance(index, slice):
+            first = self.rows[index.start]
+            return self.values[first : first + index.stop - index.start]
+        return self.values[self.rows[index]]
 
 
 class _EnergyPlan:
@@ -153,6 +167,20 @@ class _EnergyPlan:
             scene.kinematics.min_intervals,
         )
         self._robot = scene.robot
+        # Tendon chords measured inside their segments when the routing allows it; the load
+        # energy then needs world frames only at the mass and force sites.
+        self.chords = None
+        world = [k for k in self.mass_ids + self.force_ids if not isinstance(k, tuple)]
+        if self.routing is not None:
+            ids = np.arange(self.guide_ids.start, self.guide_ids.stop)
+            knot = self.knots.flat_index[ids] % self.knots.width
+            self.chords = LocalChords.build(self.routing, knot, self.knots.width, scene.n_segments)
+            if self.chords is None:
+                world += ids.tolist()
+        self.world_points = sorted(set(world))
+        flat = self.knots.flat_index[np.asarray(self.world_points, np.int64)]
+        self.world_runs = index_runs(flat)
+        self.world_segments = [int(self.points.segs[k]) for k in self.world_points]
 
     def node_mass(self, dtype):
         """Mass beyond each position node (weights of the by-parts weight), or None."""
@@ -424,6 +452,21 @@ class Scene(eqx.Module):
         local = self._local_kinematics(self.coordinates(q), plan, consts)
         return energy + self._load_energy(local, controls, plan, consts)
 
+    def _segment_local(self, qi, length, knots, node_weights, chords):
+        """One segment's part of the local kinematics: its knot frames and weighted tangent
+        integral in its base frame, and its tendons' lengths inside it (None without
+        :class:`LocalChords`)."""
+        rot, pos, moment = segment_knot_frames(self.model, qi, length, knots, node_weights)
+        parts = None if chords is None else segment_tendon_parts(rot, pos, chords)
+        return rot, pos, moment, parts
+
+    def _segment_inputs(self, plan: "_EnergyPlan", consts: SceneConstants, dtype):
+        """Per-segment arguments of :meth:`_segment_local` (leading axis: segments)."""
+        lengths = self.robot.stacked("length").astype(dtype)
+        grid = jnp.asarray(plan.knots.s, dtype)
+        chords = None if plan.chords is None else plan.chords.inputs(consts.guide_offsets)
+        return lengths, grid, consts.node_mass, chords
+
     # The energy is E_el(q) + Psi(L_0(q_0), ..., L_n-1(q_n-1)): each segment's local kinematics
     # L_i (frames at its knots in its own base frame) depends on its own coordinates only, and
     # Psi (chaining, tendons, weight, loads) is cheap. _hessian.py uses this structure.
@@ -436,11 +479,8 @@ class Scene(eqx.Module):
         self, coords: Float[Array, "n d"], plan: "_EnergyPlan", consts: SceneConstants
     ):
         """Per-segment local frames at the knots, and the local frames of traced load sites."""
-        dtype = coords.dtype
-        lengths = self.robot.stacked("length").astype(dtype)
-        grid = jnp.asarray(plan.knots.s, dtype)
-        segments = jax.vmap(lambda qi, li, ki, wi: segment_knot_frames(self.model, qi, li, ki, wi))(
-            coords, lengths, grid, consts.node_mass
+        segments = jax.vmap(self._segment_local)(
+            coords, *self._segment_inputs(plan, consts, coords.dtype)
         )
         traced = tuple(self._traced_local(coords[k], k, s_k) for k, s_k in plan.points.traced)
         return segments, traced
@@ -453,24 +493,32 @@ class Scene(eqx.Module):
         self, local, controls, plan: "_EnergyPlan", consts: SceneConstants
     ) -> Float[Array, ""]:
         """``Psi``: gravity, tendon and world-force energy (J) from the local kinematics."""
-        (rot, pos, moment), traced = local
+        (rot, pos, moment, parts), traced = local
         dtype = rot.dtype
         base_rot, base_pos = chain_segments(
             rot[:, -1], pos[:, -1], self.robot.base_rotation, self.robot.base_position
         )
-        world_rot = plan.knots.select(matmul3(base_rot[:, None], rot))
-        world_pos = plan.knots.select(base_pos[:, None, :] + matvec3(base_rot[:, None], pos))
-        if traced:
-            sites = [k for k, _ in plan.points.traced]
-            extra_rot = [matmul3(base_rot[k], r) for k, (r, _) in zip(sites, traced, strict=True)]
-            extra_pos = [
-                base_pos[k] + matvec3(base_rot[k], p)
-                for k, (_, p) in zip(sites, traced, strict=True)
-            ]
-            world_rot = jnp.concatenate([world_rot, jnp.stack(extra_rot)])
-            world_pos = jnp.concatenate([world_pos, jnp.stack(extra_pos)])
-        rot_at = _Indexed(world_rot, len(plan.points.segs))
-        pos_at = _Indexed(world_pos, len(plan.points.segs))
+        # World frames of the points that need them (static slices, no gather).
+        segs = plan.world_segments + [k for k, _ in plan.points.traced]
+        local_rot = [r for r, _ in traced]
+        local_pos = [p for _, p in traced]
+        if plan.world_points:
+            local_rot = [take_runs(rot, plan.world_runs)] + [r[None] for r in local_rot]
+            local_pos = [take_runs(pos, plan.world_runs)] + [p[None] for p in local_pos]
+        else:
+            local_rot = [r[None] for r in local_rot]
+            local_pos = [p[None] for p in local_pos]
+        rows = {k: i for i, k in enumerate(plan.world_points)}
+        rot_at = pos_at = _Indexed(None, rows, len(plan.world_points))
+        if segs:
+            frame_rot = jnp.stack([base_rot[k] for k in segs])
+            frame_pos = jnp.stack([base_pos[k] for k in segs])
+            local_rot = jnp.concatenate(local_rot)
+            local_pos = jnp.concatenate(local_pos)
+            rot_at = _Indexed(matmul3(frame_rot, local_rot), rows, len(plan.world_points))
+            pos_at = _Indexed(
+                frame_pos + matvec3(frame_rot, local_pos), rows, len(plan.world_points)
+            )
         energy = jnp.zeros((), dtype)
         if plan.gravity is not None:
             accel = plan.gravity.acceleration.astype(dtype)
@@ -480,10 +528,12 @@ class Scene(eqx.Module):
             for pm, k in zip(plan.point_masses, plan.mass_ids, strict=True):
                 energy = energy - pm.mass.astype(dtype) * (pos_at[k] @ accel)
         if plan.routing is not None:
-            routing = plan.routing
-            sl = plan.guide_ids
-            guides = pos_at[sl] + matvec3(rot_at[sl], consts.guide_offsets)
-            lengths = routing.lengths(guides)
+            if parts is not None:
+                lengths = jnp.sum(parts, axis=0)
+            else:
+                sl = plan.guide_ids
+                guides = pos_at[sl] + matvec3(rot_at[sl], consts.guide_offsets)
+                lengths = plan.routing.lengths(guides)
             energy = energy + tendon_energy(self.tendons, lengths, consts.rest_lengths, controls)
         for f, k in zip(plan.forces, plan.force_ids, strict=True):
             energy = energy - jnp.sum(f.force.astype(dtype) * pos_at[k])

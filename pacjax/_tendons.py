@@ -218,3 +218,83 @@ def tendon_tensions(
         else:
             out.append(controls[i].astype(lengths.dtype))
     return jnp.stack(out)
+
+
+class LocalChords:
+    """The tendons' chords, each written in the base frame of the one segment it lies in.
+
+    A chord's length does not change when the whole segment moves, so a chord between two guide
+    points of segment ``k`` (or from the ring at the end of segment ``k - 1``, which is the
+    origin of segment ``k``'s base frame, to a guide point of segment ``k``) depends on
+    segment ``k``'s coordinates only. Tendon lengths are then a sum of per-segment parts, and
+    the energy's Hessian needs no chaining of segments for the tendons. :meth:`build` returns
+    None when a chord spans a segment without a ring at its ends (the world-frame path then
+    measures every chord).
+
+    Per segment, ``slots`` chords (padded): one-hot rows picking each end's knot, whether the
+    start is the base ring, which routing points give the offsets, and which tendon each chord
+    belongs to.
+    """
+
+    def __init__(self, pick_a, base_a, pick_b, point_a, point_b, mask, tendon):
+        self.pick_a, self.base_a, self.pick_b = pick_a, base_a, pick_b
+        self.point_a, self.point_b, self.mask, self.tendon = point_a, point_b, mask, tendon
+
+    @classmethod
+    def build(cls, routing: TendonRouting, knot: np.ndarray, width: int, n_segments: int):
+        """``knot``: each routing point's knot index within its segment."""
+        owned: list[list[tuple]] = [[] for _ in range(n_segments)]
+        for c, a in enumerate(routing.chord_start.tolist()):
+            b = a + 1
+            seg_a, seg_b = int(routing.point_segment[a]), int(routing.point_segment[b])
+            if seg_a == seg_b:
+                owned[seg_b].append((knot[a], False, knot[b], a, b, routing.chord_tendon[c]))
+            elif seg_b == seg_a + 1 and routing.point_s[a] == 1.0:
+                owned[seg_b].append((0, True, knot[b], a, b, routing.chord_tendon[c]))
+            else:
+                return None
+        slots = max(1, max(len(o) for o in owned))
+        shape = (n_segments, slots)
+        pick_a, pick_b = np.zeros(shape + (width,)), np.zeros(shape + (width,))
+        base_a, mask = np.zeros(shape), np.zeros(shape)
+        point_a, point_b = np.zeros(shape, np.int64), np.zeros(shape, np.int64)
+        tendon = np.zeros(shape + (routing.n_tendons,))
+        for i, chords in enumerate(owned):
+            for j, (ka, is_base, kb, a, b, t) in enumerate(chords):
+                pick_a[i, j, ka] = 0.0 if is_base else 1.0
+                base_a[i, j] = 1.0 if is_base else 0.0
+                pick_b[i, j, kb] = 1.0
+                point_a[i, j], point_b[i, j] = a, b
+                mask[i, j] = 1.0
+                tendon[i, j, t] = 1.0
+        return cls(pick_a, base_a, pick_b, point_a, point_b, mask, tendon)
+
+    def inputs(self, offsets: Float[Array, "p 3"]) -> dict:
+        """Per-segment arrays for :func:`segment_tendon_parts` (leading axis: segments)."""
+        dtype = offsets.dtype
+        return {
+            "pick_a": jnp.asarray(self.pick_a, dtype),
+            "base_a": jnp.asarray(self.base_a, dtype),
+            "pick_b": jnp.asarray(self.pick_b, dtype),
+            "offset_a": offsets[self.point_a],
+            "offset_b": offsets[self.point_b],
+            "mask": jnp.asarray(self.mask, dtype),
+            "tendon": jnp.asarray(self.tendon, dtype),
+        }
+
+
+def segment_tendon_parts(rot, pos, chords: dict) -> Float[Array, " m"]:
+    """Each tendon's length (m) inside one segment, from the segment's local knot frames
+    (``rot`` (k, 3, 3), ``pos`` (k, 3)) and its :meth:`LocalChords.inputs` row."""
+
+    def ends(pick, offset):
+        r = jnp.einsum("ck,kij->cij", pick, rot)
+        return jnp.einsum("ck,ki->ci", pick, pos) + jnp.einsum("cij,cj->ci", r, offset)
+
+    start = ends(chords["pick_a"], chords["offset_a"])
+    start = start + chords["base_a"][:, None] * chords["offset_a"]
+    chord = ends(chords["pick_b"], chords["offset_b"]) - start
+    mask = chords["mask"]
+    # Padding slots have no chord: a unit length there keeps the square root smooth.
+    sq = jnp.where(mask > 0, jnp.sum(chord * chord, axis=-1), 1.0)
+    return (mask * jnp.sqrt(sq)) @ chords["tendon"]
