@@ -132,6 +132,11 @@ class _Scaled(eqx.Module):
         r = self.residual(y)
         return r, 0.5 * jnp.sum(r * r)
 
+    def energy(self, y):
+        """Potential energy (J) at ``y``: the merit of a conservative scene, without its
+        gradient."""
+        return self.scene.potential_energy(self.q(y), self.controls, self.consts)
+
     def linearise(self, y):
         """Scaled residual and its Jacobian from the structured Hessian (conservative scenes):
         ``(dr/dy, (r, (energy, weights)))``."""

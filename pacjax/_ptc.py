@@ -82,7 +82,8 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
     stability_tol: float = 1e-12
     symmetric: bool = True
     # When True, ``args.linearise(y) -> (jacobian, (r, aux))`` gives the residual and its
-    # Jacobian together (the structured Hessian of :mod:`pacjax._hessian`) instead of jacfwd.
+    # Jacobian together (the structured Hessian of :mod:`pacjax._hessian`) instead of jacfwd,
+    # and ``args.energy(y)`` the merit alone.
     structured: bool = False
 
     def init(self, fn, y, args, options, f_struct, aux_struct, tags):
@@ -160,8 +161,19 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
             slack = 64 * eps * (jnp.abs(state.merit) + jnp.abs(merit))
             return finite & ((merit <= state.merit + slack) | self._converged(r))
 
-        # Backtracking on the continuation step: residual evaluations only, no Jacobian. The
-        # loop starts at the full step (alpha = 1), so the residual graph is traced once.
+        # Backtracking on the continuation step, no Jacobian. The full step (alpha = 1) is
+        # checked with the residual too: near a solution its energy may rise by rounding while
+        # the residual is converged. Shorter steps are checked on the merit alone, which for a
+        # conservative scene is the energy without its gradient (a third of the cost). Under
+        # vmap every row of a batch is at the same alpha in a given trial, so this split costs
+        # no evaluation of the other kind.
+        if self.structured:
+            merit_only = args.energy
+        else:
+
+            def merit_only(y_):
+                return fn(y_, args)[1][0]
+
         def search_cond(carry):
             alpha, ok = carry
             return ~ok & (alpha > _MIN_ALPHA)
@@ -169,12 +181,14 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
         def search_body(carry):
             alpha, _ = carry
             alpha = 0.5 * alpha
-            r, (merit, _) = fn(y + alpha * delta, args)
-            return alpha, acceptable(r, merit) | first | escape
+            merit = merit_only(y + alpha * delta)
+            slack = 64 * eps * (jnp.abs(state.merit) + jnp.abs(merit))
+            fine = jnp.isfinite(merit) & (merit <= state.merit + slack)
+            return alpha, fine | first | escape
 
-        alpha, ok = jax.lax.while_loop(
-            search_cond, search_body, (jnp.asarray(2.0, dtype), jnp.asarray(False))
-        )
+        r_full, (m_full, _) = fn(y + delta, args)
+        ok_full = acceptable(r_full, m_full) | first | escape
+        alpha, ok = jax.lax.while_loop(search_cond, search_body, (jnp.asarray(1.0, dtype), ok_full))
         # No acceptable step even at the smallest length: take the shortest flow step when dt
         # is already tiny (it is a descent direction), else shrink dt and stay.
         tiny_dt = state.dt <= _MIN_DT
