@@ -11,6 +11,11 @@ with ``J_i = dL_i / dq_i`` (forward mode, ``d`` directions per segment) and
 ``lambda = dPsi / dL``. The expensive kinematics is differentiated twice along the ``d``
 coordinates of its own segment only, instead of along all ``n d`` coordinates of the robot as a
 plain ``jax.hessian`` does; the ``n d`` directions go through the cheap ``Psi`` alone.
+
+``L_i`` also holds each tendon's length inside segment ``i`` when every chord of the routing
+lies in one segment (:class:`pacjax._tendons.LocalChords`): a chord's length does not depend on
+where its segment is. ``Psi`` then sums those parts and needs world frames only at the mass and
+force sites, so its Hessian along the ``n d`` directions is a small fraction of the total.
 """
 
 import jax
