@@ -500,14 +500,11 @@ class Scene(eqx.Module):
         )
         # World frames of the points that need them (static slices, no gather).
         segs = plan.world_segments + [k for k, _ in plan.points.traced]
-        local_rot = [r for r, _ in traced]
-        local_pos = [p for _, p in traced]
+        local_rot = [r[None] for r, _ in traced]
+        local_pos = [p[None] for _, p in traced]
         if plan.world_points:
-            local_rot = [take_runs(rot, plan.world_runs)] + [r[None] for r in local_rot]
-            local_pos = [take_runs(pos, plan.world_runs)] + [p[None] for p in local_pos]
-        else:
-            local_rot = [r[None] for r in local_rot]
-            local_pos = [p[None] for p in local_pos]
+            local_rot.insert(0, take_runs(rot, plan.world_runs))
+            local_pos.insert(0, take_runs(pos, plan.world_runs))
         rows = {k: i for i, k in enumerate(plan.world_points)}
         rot_at = pos_at = _Indexed(None, rows, len(plan.world_points))
         if segs:
