@@ -156,10 +156,13 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
             newton = jax.lax.cond(near, try_newton, lambda: flow)
         delta = jnp.where(first, 0.0, jnp.where(escape, state.escape_dy, newton))
 
+        def descends(merit):
+            slack = 64 * eps * (jnp.abs(state.merit) + jnp.abs(merit))
+            return jnp.isfinite(merit) & (merit <= state.merit + slack)
+
         def acceptable(r, merit):
             finite = jnp.all(jnp.isfinite(r)) & jnp.isfinite(merit)
-            slack = 64 * eps * (jnp.abs(state.merit) + jnp.abs(merit))
-            return finite & ((merit <= state.merit + slack) | self._converged(r))
+            return finite & (descends(merit) | self._converged(r))
 
         # Backtracking on the continuation step, no Jacobian. The full step (alpha = 1) is
         # checked with the residual too: near a solution its energy may rise by rounding while
@@ -181,10 +184,7 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
         def search_body(carry):
             alpha, _ = carry
             alpha = 0.5 * alpha
-            merit = merit_only(y + alpha * delta)
-            slack = 64 * eps * (jnp.abs(state.merit) + jnp.abs(merit))
-            fine = jnp.isfinite(merit) & (merit <= state.merit + slack)
-            return alpha, fine | first | escape
+            return alpha, descends(merit_only(y + alpha * delta)) | first | escape
 
         r_full, (m_full, _) = fn(y + delta, args)
         ok_full = acceptable(r_full, m_full) | first | escape
