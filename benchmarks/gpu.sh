@@ -8,11 +8,11 @@
 # Run from the repository root with pacjax importable (installed, or PYTHONPATH=$PWD) and a JAX
 # that sees the GPU. Writes into $OUT (the Markdown tables into $MD_DIR, default $OUT):
 # machine.txt, bench_pac.{json,md} (PAC float64 and float32 at batch 10,000, the gradient
-# through a batch), bench_models.{json,md} (PCC and PolynomialCurvature(3)),
+# through a batch, and with PAC_BASELINE_BATCH > 0 the plain-flow baseline in the same process), bench_models.{json,md} (PCC and PolynomialCurvature(3)),
 # bench_baseline.{json,md} (PAC at batch 1,000 against the plain damped flow), with
 # STAGE_BATCH_N > 0 batch_run.json (the summary of one `pacjax batch` run of that many rows:
 # rate, peak memory), and log.txt. Each stage's time limit and size can be set from the
-# environment (the names below). benchmarks/RESULTS.md has what it measured on an H100.
+# environment (the names below); a stage whose limit is 0 is skipped. benchmarks/RESULTS.md has what it measured on an H100.
 set -u
 OUT=${OUT:-bench-gpu}
 mkdir -p "$OUT"
@@ -24,6 +24,10 @@ CLI=("$PY" -m pacjax.cli)
 stage() {  # stage SECONDS NAME COMMAND...
     local limit=$1 name=$2
     shift 2
+    if [ "$limit" -le 0 ]; then
+        echo "=== $name: skipped (limit 0)" | tee -a "$LOG"
+        return
+    fi
     echo "=== $name (limit ${limit} s) $(date +%T)" | tee -a "$LOG"
     local t0=$SECONDS
     timeout "$limit" "$@" >>"$LOG" 2>&1
@@ -40,7 +44,8 @@ stage() {  # stage SECONDS NAME COMMAND...
 cat "$OUT/machine.txt"
 
 stage "${STAGE_PAC_S:-240}" bench_pac "${CLI[@]}" bench --models PAC --dtypes float64,float32 \
-    --batch "${BATCHES:-10000}" --baseline-batch 0 --grad-batch "${GRAD_BATCH:-1000}" \
+    --batch "${BATCHES:-10000}" --baseline-batch "${PAC_BASELINE_BATCH:-0}" \
+    --grad-batch "${GRAD_BATCH:-1000}" \
     --json "$OUT/bench_pac.json" --md "${MD_DIR:-$OUT}/bench_pac.md"
 
 stage "${STAGE_MODELS_S:-100}" bench_models "${CLI[@]}" bench --models PCC,Poly3 \

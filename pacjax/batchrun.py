@@ -271,6 +271,9 @@ class BatchSummary:
     chunk_size: int
     peak_memory_mib: float
     max_residual_converged: float
+    #: Peak memory in use on the accelerator(s), the largest over the local devices (MiB);
+    #: None where the backend does not report it (the CPU).
+    peak_device_memory_mib: float | None = None
 
     @property
     def converged_fraction(self) -> float:
@@ -307,7 +310,12 @@ class BatchSummary:
             f"equilibria/s: {self.equilibria_per_s:.1f} overall"
             + (f", {warm:.1f} after the first chunk" if warm else ""),
             f"largest residual of a converged row: {self.max_residual_converged:.2e}",
-            f"peak memory (max RSS): {self.peak_memory_mib:.0f} MiB",
+            f"peak memory (max RSS): {self.peak_memory_mib:.0f} MiB"
+            + (
+                f", on the accelerator {self.peak_device_memory_mib:.0f} MiB"
+                if self.peak_device_memory_mib is not None
+                else ""
+            ),
         ]
 
 
@@ -315,6 +323,17 @@ def peak_memory_mib() -> float:
     """Peak resident memory of this process (MiB), from ``resource.getrusage``."""
     rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     return rss / 2**20 if sys.platform == "darwin" else rss / 2**10  # bytes on macOS, KiB on Linux
+
+
+def peak_device_memory_mib() -> float | None:
+    """Peak memory in use on this process's devices (MiB, the largest device), from
+    ``jax.Device.memory_stats``; None where no device reports it (XLA:CPU reports nothing)."""
+    peaks = []
+    for device in jax.local_devices():
+        stats = device.memory_stats() or {}
+        if "peak_bytes_in_use" in stats:
+            peaks.append(stats["peak_bytes_in_use"] / 2**20)
+    return max(peaks) if peaks else None
 
 
 def run_batch(
@@ -372,6 +391,7 @@ def run_batch(
         chunk_size=chunk,
         peak_memory_mib=peak_memory_mib(),
         max_residual_converged=max_res,
+        peak_device_memory_mib=peak_device_memory_mib(),
     )
 
 
