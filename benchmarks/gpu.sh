@@ -49,7 +49,7 @@ stage "${STAGE_PAC_S:-240}" bench_pac "${CLI[@]}" bench --models PAC --dtypes fl
     --json "$OUT/bench_pac.json" --md "${MD_DIR:-$OUT}/bench_pac.md"
 
 stage "${STAGE_MODELS_S:-100}" bench_models "${CLI[@]}" bench --models PCC,Poly3 \
-    --dtypes float64 --batch "${MODEL_BATCH:-10000}" --baseline-batch 0 --grad-batch 0 \
+    --dtypes "${MODEL_DTYPES:-float64}" --batch "${MODEL_BATCH:-10000}" --baseline-batch 0 --grad-batch 0 \
     --json "$OUT/bench_models.json" --md "${MD_DIR:-$OUT}/bench_models.md"
 
 stage "${STAGE_BASELINE_S:-120}" bench_baseline "${CLI[@]}" bench --models PAC --dtypes float64 \
