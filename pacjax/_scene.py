@@ -13,13 +13,13 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from ._energy import elastic_energy, mass_beyond, moment_cotangent, robot_section_stiffness
+from ._energy_plan import EnergyPlan, Indexed
 from ._kinematics import (
     KinematicsConfig,
     Knots,
     PointLayout,
     chain_segments,
     grid_frames,
-    index_runs,
     knot_frames,
     local_frame,
     segment_knot_frames,
@@ -30,7 +30,6 @@ from ._robot import Robot, concrete
 from ._rotation import matmul3, matvec3
 from ._strain import StrainModel
 from ._tendons import (
-    LocalChords,
     Tendon,
     TendonRouting,
     segment_tendon_parts,
@@ -94,99 +93,6 @@ def _count(owner: str, value) -> int:
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
         raise TypeError(f"{owner} must be an integer, got {value!r}")
     return int(value)
-
-
-class _PointSet:
-    """The points ``(segment, s)`` that one energy evaluation needs.
-
-    Points with a concrete ``s`` become knots; a point whose ``s`` is traced (a load site that is
-    a scene parameter) is integrated on its own. ``add``/``add_static`` return where the point's
-    frame will be in the output of :meth:`evaluate` (static indices: slices, not gathers).
-    """
-
-    def __init__(self, n_segments: int):
-        self.n_segments = n_segments
-        self.segs: list[int] = []
-        self.s: list[float] = []
-        self.traced: list[tuple[int, jax.Array]] = []
-
-    def __bool__(self):
-        return bool(self.segs or self.traced)
-
-    def add_static(self, segs, s) -> slice:
-        start = len(self.segs)
-        self.segs += [int(k) for k in np.asarray(segs).reshape(-1)]
-        self.s += [float(v) for v in np.asarray(s, float).reshape(-1)]
-        return slice(start, len(self.segs))
-
-    def add(self, segment: int, s) -> int | tuple:
-        value = None if isinstance(s, jax.core.Tracer) else concrete(s)
-        if value is not None:
-            return self.add_static([segment], [float(value)]).start
-        self.traced.append((segment, s))
-        return ("traced", len(self.traced) - 1)
-
-
-class _Indexed:
-    """Frames indexed by what :class:`_PointSet` handed out: ``rows`` maps a static point to
-    its row of ``values``; traced points come after the ``n_static`` static ones."""
-
-    def __init__(self, values, rows: dict, n_static: int):
-        self.values = values
-        self.rows = rows
-        self.n_static = n_static
-
-    def __getitem__(self, index):
-        if isinstance(index, tuple):
-            return self.values[self.n_static + index[1]]
-        if isinstance(index, slice):
-            first = self.rows[index.start]
-            return self.values[first : first + index.stop - index.start]
-        return self.values[self.rows[index]]
-
-
-class _EnergyPlan:
-    """What the load part of one energy evaluation needs: points, knots and term layout."""
-
-    def __init__(self, scene: "Scene"):
-        self.gravity = scene.gravity
-        self.points = _PointSet(scene.n_segments)
-        self.point_masses = scene._of(PointMass) if self.gravity is not None else []
-        self.forces = scene._of(PointForce, follower=False)
-        self.mass_ids = [self.points.add(pm.segment, pm.s) for pm in self.point_masses]
-        self.routing = TendonRouting(scene.tendons) if scene.tendons else None
-        if self.routing is not None:
-            self.guide_ids = self.points.add_static(
-                self.routing.point_segment, self.routing.point_s
-            )
-        self.force_ids = [self.points.add(f.segment, f.s) for f in self.forces]
-        self.knots = Knots(
-            scene.n_segments,
-            np.asarray(self.points.segs, np.int64),
-            np.asarray(self.points.s, float),
-            scene.kinematics.min_intervals,
-        )
-        self._robot = scene.robot
-        # Tendon chords measured inside their segments when the routing allows it; the load
-        # energy then needs world frames only at the mass and force sites.
-        self.chords = None
-        world = [k for k in self.mass_ids + self.force_ids if not isinstance(k, tuple)]
-        if self.routing is not None:
-            ids = np.arange(self.guide_ids.start, self.guide_ids.stop)
-            knot = self.knots.flat_index[ids] % self.knots.width
-            self.chords = LocalChords.build(self.routing, knot, self.knots.width, scene.n_segments)
-            if self.chords is None:
-                world += ids.tolist()
-        self.world_points = sorted(set(world))
-        flat = self.knots.flat_index[np.asarray(self.world_points, np.int64)]
-        self.world_runs = index_runs(flat)
-        self.world_segments = [int(self.points.segs[k]) for k in self.world_points]
-
-    def node_mass(self, dtype):
-        """Mass beyond each position node (weights of the by-parts weight), or None."""
-        if self.gravity is None:
-            return None
-        return mass_beyond(self._robot, self.knots.node_s, dtype)
 
 
 class SceneConstants(eqx.Module):
@@ -460,7 +366,7 @@ class Scene(eqx.Module):
         parts = None if chords is None else segment_tendon_parts(rot, pos, chords)
         return rot, pos, moment, parts
 
-    def _segment_inputs(self, plan: "_EnergyPlan", consts: SceneConstants, dtype):
+    def _segment_inputs(self, plan: EnergyPlan, consts: SceneConstants, dtype):
         """Per-segment arguments of :meth:`_segment_local` (leading axis: segments)."""
         lengths = self.robot.stacked("length").astype(dtype)
         grid = jnp.asarray(plan.knots.s, dtype)
@@ -470,13 +376,13 @@ class Scene(eqx.Module):
     # The energy is E_el(q) + Psi(L_0(q_0), ..., L_n-1(q_n-1)): each segment's local kinematics
     # L_i (frames at its knots in its own base frame) depends on its own coordinates only, and
     # Psi (chaining, tendons, weight, loads) is cheap. _hessian.py uses this structure.
-    def _energy_plan(self) -> "_EnergyPlan | None":
+    def _energy_plan(self) -> EnergyPlan | None:
         """The points and terms the load part of the energy needs (None: elastic only)."""
-        plan = _EnergyPlan(self)
+        plan = EnergyPlan(self)
         return plan if plan.points or plan.gravity is not None else None
 
     def _local_kinematics(
-        self, coords: Float[Array, "n d"], plan: "_EnergyPlan", consts: SceneConstants
+        self, coords: Float[Array, "n d"], plan: EnergyPlan, consts: SceneConstants
     ):
         """Per-segment local frames at the knots, and the local frames of traced load sites."""
         segments = jax.vmap(self._segment_local)(
@@ -490,7 +396,7 @@ class Scene(eqx.Module):
         return local_frame(self.model, qk, length, jnp.asarray(s_k, qk.dtype), self.kinematics)
 
     def _load_energy(
-        self, local, controls, plan: "_EnergyPlan", consts: SceneConstants
+        self, local, controls, plan: EnergyPlan, consts: SceneConstants
     ) -> Float[Array, ""]:
         """``Psi``: gravity, tendon and world-force energy (J) from the local kinematics."""
         (rot, pos, moment, parts), traced = local
@@ -506,14 +412,14 @@ class Scene(eqx.Module):
             local_rot.insert(0, take_runs(rot, plan.world_runs))
             local_pos.insert(0, take_runs(pos, plan.world_runs))
         rows = {k: i for i, k in enumerate(plan.world_points)}
-        rot_at = pos_at = _Indexed(None, rows, len(plan.world_points))
+        rot_at = pos_at = Indexed(None, rows, len(plan.world_points))
         if segs:
             frame_rot = jnp.stack([base_rot[k] for k in segs])
             frame_pos = jnp.stack([base_pos[k] for k in segs])
             local_rot = jnp.concatenate(local_rot)
             local_pos = jnp.concatenate(local_pos)
-            rot_at = _Indexed(matmul3(frame_rot, local_rot), rows, len(plan.world_points))
-            pos_at = _Indexed(
+            rot_at = Indexed(matmul3(frame_rot, local_rot), rows, len(plan.world_points))
+            pos_at = Indexed(
                 frame_pos + matvec3(frame_rot, local_pos), rows, len(plan.world_points)
             )
         energy = jnp.zeros((), dtype)
