@@ -329,9 +329,10 @@ def inverse_statics_batch(
     """:func:`inverse_statics` for many targets at once (``vmap``-ed, in chunks).
 
     ``targets`` is (n, 3) tip positions or, with ``sites``, (n, m, 3) marker positions;
-    ``rotation`` (3, 3) or (n, 3, 3). Every target first starts from ``controls0`` (n_tendons,)
-    or (n, n_tendons), else the nearest ``workspace`` sample, else a random command; the targets
-    not reached then try further random starts together, up to ``n_starts``. Other options as
+    ``rotation`` (3, 3) or (n, 3, 3). The starts are those of :func:`inverse_statics`: first
+    ``controls0`` (n_tendons,) or (n, n_tendons) when given, then the nearest ``workspace``
+    samples, then random commands; the targets not reached after one start try the next
+    together, up to ``n_starts``. Other options as
     :func:`inverse_statics`. Returns an :class:`InverseResult` with a leading batch axis.
     """
     if not isinstance(scene, Scene):
@@ -344,33 +345,38 @@ def inverse_statics_batch(
         raise ValueError(f"chunk_size must be >= 1, got {chunk_size}")
     chunk = min(chunk_size, n)
     nt = scene.n_tendons
-    q_start = None
-    if controls0 is not None:
-        u_start = np.broadcast_to(_finite("controls0", _array("controls0", controls0)), (n, nt))
-    elif workspace is not None:
+    # Start k of every target: with a workspace, its (k+1)-th nearest sample (after
+    # controls0, when given), as inverse_statics does; then random commands.
+    near = np.zeros((n, 0), int)
+    if workspace is not None:
         ref = np.nanmean(np.where(np.asarray(tgt.mask) > 0, np.asarray(tgt.points), np.nan), 1)
-        idx = workspace.nearest(ref, 1)[:, 0]
-        u_start, q_start = np.asarray(workspace.controls)[idx], np.asarray(workspace.q)[idx]
-    else:
-        u_start = _random_starts(settings, n)
-    if q_start is None:
-        q_start = np.asarray(solve_batch(scene, u_start, chunk_size=chunk, progress=False).q)
+        near = workspace.nearest(ref, settings.n_starts)
+    if controls0 is not None:
+        u0 = np.broadcast_to(_finite("controls0", _array("controls0", controls0)), (n, nt))
+        near = near[:, : settings.n_starts - 1]
 
-    u_best = np.zeros((n, nt))
+    def start(k, rows):
+        """Commands and equilibria of start ``k`` for the targets ``rows`` (full-size arrays)."""
+        u, q = np.zeros((n, nt)), np.zeros((n, scene.n_dofs))
+        j = k - (controls0 is not None)
+        if j < 0:
+            u[rows] = u0[rows]
+        elif j < near.shape[1]:
+            idx = near[rows, j]
+            u[rows], q[rows] = np.asarray(workspace.controls)[idx], np.asarray(workspace.q)[idx]
+            return u, q
+        else:
+            u[rows] = _random_starts(settings, n, key_offset=k)[rows]
+        q[rows] = np.asarray(solve_batch(scene, u[rows], chunk_size=chunk, progress=False).q)
+        return u, q
+
     fields = None
     cost = np.full(n, np.inf)
     iterations = np.zeros(n, int)
     starts = np.zeros(n, int)
     todo = np.arange(n)
     for k in range(settings.n_starts):
-        if k > 0:
-            u_start = _random_starts(settings, n, key_offset=k)
-            q_start = np.asarray(
-                solve_batch(scene, u_start[todo], chunk_size=chunk, progress=False).q
-            )
-            q_full = np.zeros((n, scene.n_dofs))
-            q_full[todo] = q_start
-            q_start = q_full
+        u_start, q_start = start(k, todo)
         for begin in range(0, todo.size, chunk):
             rows = todo[begin : begin + chunk]
             pad = np.concatenate([rows, np.repeat(rows[-1:], chunk - rows.size)])
