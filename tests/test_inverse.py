@@ -194,6 +194,44 @@ def test_bad_scene_and_batch_input():
         pj.inverse_statics(tension_scene, [0, 0, -0.2])
 
 
+def test_batch_starts_follow_the_workspace_order(monkeypatch):
+    """A batched target that misses from its nearest workspace sample tries the next nearest
+    (as :func:`pj.inverse_statics` does), not a random command. The Levenberg-Marquardt solve is
+    replaced by a stub that reaches the target only from one sample, so nothing compiles."""
+    n_samples, nt, nd = 5, SCENE.n_tendons, SCENE.n_dofs
+    tips = np.array([[0.0, 0.0, -0.20 - 0.01 * i] for i in range(n_samples)])
+    controls = np.linspace(0.001, 0.005, n_samples)[:, None] * np.ones(nt)
+    workspace = inverse.Workspace(
+        controls=controls, q=np.zeros((n_samples, nd)), tip=tips, converged=np.ones(5, bool)
+    )
+    target = np.array([[0.0, 0.0, -0.201]])  # nearest: sample 0, then sample 1
+    seen = []
+
+    def stub(scene, tgt, limits, u0, q0, rtol, atol, max_steps, options):
+        u0 = np.asarray(u0)
+        seen.append(u0[0].copy())
+        hit = np.allclose(u0[0], controls[1])
+        m = u0.shape[0]
+        error = np.full(m, 1e-6 if hit else 1e-2)
+        return (
+            u0,
+            np.asarray(q0),
+            error,
+            np.zeros(m),
+            np.zeros((m, 3)),
+            np.broadcast_to(np.eye(3), (m, 3, 3)),
+            np.ones(m, bool),
+            np.full(m, 7),
+        )
+
+    monkeypatch.setattr(inverse, "_solve_many", stub)
+    out = pj.inverse_statics_batch(SCENE, target, workspace=workspace, n_starts=3)
+    np.testing.assert_allclose(seen[0], controls[0])
+    np.testing.assert_allclose(seen[-1], controls[1])
+    assert bool(out.reached[0]) and int(out.starts[0]) == 2
+    np.testing.assert_allclose(np.asarray(out.controls[0]), controls[1])
+
+
 @pytest.mark.slow
 @pytest.mark.expensive  # not yet seen to finish on 2 cores
 def test_pose_target(targets):
