@@ -187,6 +187,35 @@ def _tensions(scene, q, u):
     return scene.tendon_tensions(q, u)
 
 
+#: How far past the point where it turns taut a slack tendon is pulled (fraction of the command
+#: range) when a solve stopped short of its target with that tendon slack.
+_TAUT_MARGIN = 0.01
+
+
+def _taut_core(scene, limits: _Limits, u, q):
+    """Commands with every slack tendon pulled until it is just taut at ``q`` (within the
+    bounds), and whether any command changed.
+
+    A slack tendon's command does not move the equilibrium, so its column of the least-squares
+    Jacobian is zero and Levenberg-Marquardt cannot see that pulling it would help; the
+    low-tension preference leads tendons there. Restarting from these commands gives the
+    solver that column back.
+    """
+    taut = scene.rest_tendon_lengths(q.dtype) - scene.tendon_lengths(q)
+    taut = taut + _TAUT_MARGIN * (limits.upper - limits.lower)
+    slack = scene.tendon_tensions(q, u) <= 0.0
+    new = jnp.where(slack, jnp.clip(jnp.maximum(u, taut), limits.lower, limits.upper), u)
+    return new, jnp.any(new != u)
+
+
+_taut_one = eqx.filter_jit(_taut_core)
+
+
+@eqx.filter_jit
+def _taut_many(scene, limits, u, q):
+    return jax.vmap(lambda a, b: _taut_core(scene, limits, a, b))(u, q)
+
+
 # ------------------------------------------------------------------------------ input checks
 def _array(name, value, shape=None):
     try:

@@ -55,6 +55,8 @@ from ._inverse_problem import (
     _make_target,
     _solve_many,
     _solve_one,
+    _taut_many,
+    _taut_one,
     _tensions,
 )
 from ._inverse_problem import default_command_range as default_command_range
@@ -262,42 +264,43 @@ def inverse_statics(
     starts += [(u, None) for u in _random_starts(settings, settings.n_starts)]
     starts = starts[: settings.n_starts]
 
+    tol = (jnp.asarray(settings.rtol), jnp.asarray(settings.atol), settings.max_steps)
+
+    def solve_from(u, q):
+        """Levenberg-Marquardt from ``(u, q)``, then the polish; (result, iterations)."""
+        out = _solve_one(scene, tgt, settings.limits, u, q, *tol, settings.options)
+        steps = int(out[-1])
+        if bool(out[6]) and float(out[2]) > _POLISH * settings.reached_tol:
+            free = _without_tension_weight(settings.limits)
+            polished = _solve_one(scene, tgt, free, out[0], out[1], *tol, settings.options)
+            steps += int(polished[-1])
+            if bool(polished[6]) and float(polished[2]) < float(out[2]):
+                out = polished
+        return out, steps
+
+    def reached(out):
+        return _is_reached(settings, float(out[2]), float(out[3]), bool(out[6]))
+
+    def cost(out):
+        return float(_cost(settings, out[2], out[3], tgt.orientation_weight))
+
     best, iterations = None, 0
     k = 0
     for k, (u, q) in enumerate(starts, start=1):  # noqa: B007  (k: starts used)
         if q is None:
             q = solve_equilibrium(scene, u, **dict(settings.options)).q
-        out = _solve_one(
-            scene,
-            tgt,
-            settings.limits,
-            jnp.asarray(u),
-            jnp.asarray(q),
-            jnp.asarray(settings.rtol),
-            jnp.asarray(settings.atol),
-            settings.max_steps,
-            settings.options,
-        )
-        iterations += int(out[-1])
-        if bool(out[6]) and float(out[2]) > _POLISH * settings.reached_tol:
-            polished = _solve_one(
-                scene,
-                tgt,
-                _without_tension_weight(settings.limits),
-                out[0],
-                out[1],
-                jnp.asarray(settings.rtol),
-                jnp.asarray(settings.atol),
-                settings.max_steps,
-                settings.options,
-            )
-            iterations += int(polished[-1])
-            if bool(polished[6]) and float(polished[2]) < float(out[2]):
-                out = polished
-        cost = float(_cost(settings, out[2], out[3], tgt.orientation_weight))
-        if best is None or cost < best[0]:
-            best = (cost, out)
-        if _is_reached(settings, float(out[2]), float(out[3]), bool(out[6])):
+        out, steps = solve_from(jnp.asarray(u), jnp.asarray(q))
+        iterations += steps
+        if bool(out[6]) and not reached(out):  # stopped short: slack tendons pulled taut
+            u_taut, changed = _taut_one(scene, settings.limits, out[0], out[1])
+            if bool(changed):
+                again, steps = solve_from(u_taut, out[1])
+                iterations += steps
+                if cost(again) < cost(out):
+                    out = again
+        if best is None or cost(out) < best[0]:
+            best = (cost(out), out)
+        if reached(out):
             break
     u, q, error, angle, tip, rot, ok, _ = best[1]
     return _result(scene, settings, u, q, error, angle, tip, rot, ok, iterations, k)
@@ -370,6 +373,63 @@ def inverse_statics_batch(
         q[rows] = np.asarray(solve_batch(scene, u[rows], chunk_size=chunk, progress=False).q)
         return u, q
 
+    tol = (jnp.asarray(settings.rtol), jnp.asarray(settings.atol), settings.max_steps)
+    weight = np.asarray(tgt.orientation_weight)
+
+    def padded(rows):
+        """``rows`` in pieces of ``chunk``, each with its padded index array."""
+        for begin in range(0, rows.size, chunk):
+            part = np.arange(begin, min(begin + chunk, rows.size))
+            yield part, np.concatenate([part, np.repeat(part[-1:], chunk - part.size)])
+
+    def solve_rows(rows, u, q):
+        """Levenberg-Marquardt and the polish for the targets ``rows`` from ``u``, ``q``
+        (aligned with ``rows``), chunk by chunk; the 7 result fields and the iterations."""
+        parts = []
+        for part, pad in padded(rows):
+            sub = jtu.tree_map(lambda x, p=rows[pad]: x[p], tgt)
+            u_p, q_p = jnp.asarray(u[pad]), jnp.asarray(q[pad])
+            out = _solve_many(scene, sub, settings.limits, u_p, q_p, *tol, settings.options)
+            out = [np.array(x)[: part.size] for x in out]
+            polish = out[6] & (out[2] > _POLISH * settings.reached_tol)
+            if np.any(polish):
+                free = _without_tension_weight(settings.limits)
+                again = _solve_many(
+                    scene,
+                    sub,
+                    free,
+                    jnp.asarray(_pad_rows(out[0], chunk)),
+                    jnp.asarray(_pad_rows(out[1], chunk)),
+                    *tol,
+                    settings.options,
+                )
+                again = [np.asarray(x)[: part.size] for x in again]
+                take = polish & again[6] & (again[2] < out[2])
+                for f, x in zip(out[:7], again[:7], strict=True):
+                    f[take] = x[take]
+                out[7] = out[7] + np.where(polish, again[7], 0)
+            parts.append(out)
+        return [np.concatenate(f) for f in zip(*parts, strict=True)]
+
+    def retry_taut(rows, out):
+        """Rows that stopped short with slack tendons: again from those tendons pulled taut."""
+        miss = np.flatnonzero(out[6] & ~_is_reached(settings, out[2], out[3], out[6]))
+        if miss.size == 0:
+            return
+        u_taut, changed = np.zeros((miss.size, nt)), np.zeros(miss.size, bool)
+        for part, pad in padded(miss):
+            u_p, c_p = _taut_many(scene, settings.limits, out[0][miss[pad]], out[1][miss[pad]])
+            u_taut[part], changed[part] = np.asarray(u_p)[: part.size], c_p[: part.size]
+        sel = miss[changed]
+        if sel.size == 0:
+            return
+        again = solve_rows(rows[sel], u_taut[changed], out[1][sel])
+        old = _cost(settings, out[2][sel], out[3][sel], weight[rows[sel]])
+        take = _cost(settings, again[2], again[3], weight[rows[sel]]) < old
+        for f, x in zip(out[:7], again[:7], strict=True):
+            f[sel[take]] = x[take]
+        out[7][sel] += again[7]
+
     fields = None
     cost = np.full(n, np.inf)
     iterations = np.zeros(n, int)
@@ -377,48 +437,17 @@ def inverse_statics_batch(
     todo = np.arange(n)
     for k in range(settings.n_starts):
         u_start, q_start = start(k, todo)
-        for begin in range(0, todo.size, chunk):
-            rows = todo[begin : begin + chunk]
-            pad = np.concatenate([rows, np.repeat(rows[-1:], chunk - rows.size)])
-            out = _solve_many(
-                scene,
-                jtu.tree_map(lambda x, p=pad: x[p], tgt),
-                settings.limits,
-                jnp.asarray(u_start[pad]),
-                jnp.asarray(q_start[pad]),
-                jnp.asarray(settings.rtol),
-                jnp.asarray(settings.atol),
-                settings.max_steps,
-                settings.options,
-            )
-            out = [np.array(x)[: rows.size] for x in out]
-            polish = out[6] & (out[2] > _POLISH * settings.reached_tol)
-            if np.any(polish):
-                again = _solve_many(
-                    scene,
-                    jtu.tree_map(lambda x, p=pad: x[p], tgt),
-                    _without_tension_weight(settings.limits),
-                    jnp.asarray(_pad_rows(out[0], chunk)),
-                    jnp.asarray(_pad_rows(out[1], chunk)),
-                    jnp.asarray(settings.rtol),
-                    jnp.asarray(settings.atol),
-                    settings.max_steps,
-                    settings.options,
-                )
-                again = [np.asarray(x)[: rows.size] for x in again]
-                take = polish & again[6] & (again[2] < out[2])
-                for f, x in zip(out[:7], again[:7], strict=True):
-                    f[take] = x[take]
-                out[7] = out[7] + np.where(polish, again[7], 0)
-            if fields is None:
-                fields = [np.zeros((n,) + x.shape[1:], x.dtype) for x in out[:7]]
-            c = _cost(settings, out[2], out[3], np.asarray(tgt.orientation_weight)[rows])
-            better = c < cost[rows]
-            for f, x in zip(fields, out[:7], strict=True):
-                f[rows[better]] = x[better]
-            cost[rows[better]] = c[better]
-            iterations[rows] += out[7]
-            starts[rows] += 1
+        out = solve_rows(todo, u_start[todo], q_start[todo])
+        retry_taut(todo, out)
+        if fields is None:
+            fields = [np.zeros((n,) + x.shape[1:], x.dtype) for x in out[:7]]
+        c = _cost(settings, out[2], out[3], weight[todo])
+        better = c < cost[todo]
+        for f, x in zip(fields, out[:7], strict=True):
+            f[todo[better]] = x[better]
+        cost[todo[better]] = c[better]
+        iterations[todo] += out[7]
+        starts[todo] += 1
         reached = _is_reached(settings, fields[2], fields[3], fields[6])
         todo = np.flatnonzero(~reached)
         if todo.size == 0:
