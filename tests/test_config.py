@@ -1,7 +1,13 @@
 """What importing pacjax sets in JAX (see pacjax/_config.py)."""
 
+import os
+import subprocess
+import sys
+import textwrap
+
 import jax
 import jax.numpy as jnp
+import pytest
 
 import pacjax  # noqa: F401
 
@@ -15,3 +21,79 @@ def test_float32_products_are_not_rounded_to_tf32():
     # JAX's GPU default (TensorFloat-32 inputs) left 0 % of the paper robot's float32 equilibria
     # converged on an H100; pacjax asks for full float32 products everywhere.
     assert jax.config.jax_default_matmul_precision in ("highest", "float32")
+
+
+def test_single_threaded_eigen_flag():
+    code = """
+        import os, warnings
+        warnings.simplefilter("error")
+        import pacjax
+        print(os.environ["XLA_FLAGS"])
+    """
+    env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
+    out = subprocess.run(
+        [sys.executable, "-c", textwrap.dedent(code)], capture_output=True, text=True, env=env
+    )
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["--xla_cpu_multi_thread_eigen=false"]
+    # a user's own setting of the flag is kept, and other flags stay
+    env["XLA_FLAGS"] = "--xla_cpu_multi_thread_eigen=true --xla_dump_to=/tmp/nowhere"
+    out = subprocess.run(
+        [sys.executable, "-c", textwrap.dedent(code)], capture_output=True, text=True, env=env
+    )
+    assert out.stdout.split() == env["XLA_FLAGS"].split()
+
+
+def test_import_after_jax_started_warns():
+    code = """
+        import jax.numpy as jnp
+        jnp.zeros(1).block_until_ready()
+        import pacjax
+    """
+    env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
+    out = subprocess.run(
+        [sys.executable, "-W", "always", "-c", textwrap.dedent(code)],
+        capture_output=True,
+        text=True,
+        env=env,
+    )
+    assert out.returncode == 0, out.stderr
+    assert "import pacjax first" in out.stderr
+
+
+@pytest.mark.slow
+def test_follower_force_batch_does_not_hang():
+    """The batched solve that hung on 2 cores with multi-threaded Eigen (every thread waiting,
+    3 of 3 runs): the synthetic data of the paper study's follower-force case. A hang fails
+    this test at the subprocess timeout instead of stalling the run."""
+    code = """
+        import numpy as np
+        import pacjax as pj
+        # the draws of experiments/paper_study/paper_study.py (seed 0, 16 frames) up to its
+        # follower-force case: other commands did not hang
+        rng = np.random.default_rng(0)
+        cases = [(1, "horizontal", (0.0, 0.5, 1.0)), (1, "hanging", (0.0, 0.5, 1.0)),
+                 (3, "hanging", (0.0, 0.2, 0.4)), (3, "hanging", (0.0,))]
+        for n_sections, mount, payloads in cases:
+            scene = pj.presets.stella2023(pj.PAC(), n_sections=n_sections, mount=mount)
+            u = rng.uniform(0.0, 0.025, (16, scene.n_tendons))
+            for k in range(0, scene.n_tendons, 3):
+                u[np.arange(16), k + rng.integers(0, 3, 16)] = 0.0
+            mass = np.asarray(payloads)[rng.integers(0, len(payloads), 16)]
+        data, truth = pj.synthetic_mocap(
+            scene, u, payload_mass=mass, noise=1e-3, dropout=0.05, orientations=True,
+            orientation_noise=0.0, seed=0, force=np.tile([0.0, 0.0, 3.41], (16, 1)),
+            force_follower=True,
+        )
+        print(len(truth.q))
+    """
+    env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
+    out = subprocess.run(
+        [sys.executable, "-c", textwrap.dedent(code)],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=900,
+    )
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert int(out.stdout.split()[-1]) >= 15  # frames whose truth converged
