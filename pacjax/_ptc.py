@@ -142,11 +142,19 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
             # first and taken when it halves the residual (one more residual evaluation per
             # such step). Far away it is not: from a straight PCC/PAC segment it jumps to the
             # spurious polar equilibrium (phi along the moment, no bending).
+            #
+            # Both systems go to LAPACK as one batched factorisation. Two independent solves
+            # are two custom calls that XLA:CPU may run at once, and jaxlib 0.10's batched
+            # LAPACK kernels then each wait on sub-tasks queued to the same intra-op thread
+            # pool: with as many such calls as pool threads (2 on a 2-core machine), every
+            # thread waits and the program hangs (seen in gdb: both in LuDecompositionKernel ->
+            # ParallelBatchMap -> BlockingCounter::Wait).
             dt_safe = jnp.where(state.eig < 0, jnp.minimum(state.dt, 0.5 / -state.eig), state.dt)
-            flow = jnp.linalg.solve(state.jacobian + eye / dt_safe, -state.residual)
+            matrices = jnp.stack([state.jacobian + eye / dt_safe, state.jacobian])
+            rhs = jnp.broadcast_to(-state.residual[:, None], (2, y.shape[0], 1))
+            flow, full = jnp.linalg.solve(matrices, rhs)[..., 0]
 
             def try_newton():
-                full = jnp.linalg.solve(state.jacobian, -state.residual)
                 r_full, _ = fn(y + full, args)
                 halves = jnp.all(jnp.isfinite(full)) & jnp.all(jnp.isfinite(r_full))
                 halves = halves & (max_abs(r_full) <= 0.5 * max_abs(state.residual))

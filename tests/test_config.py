@@ -1,4 +1,5 @@
-"""What importing pacjax sets in JAX (see pacjax/_config.py), and a known hang on 2 cores."""
+"""What importing pacjax sets in JAX (see pacjax/_config.py), and a hang on 2 cores that the
+solver must not bring back (independent batched LAPACK calls; see pacjax/_ptc.py)."""
 
 import subprocess
 import sys
@@ -22,14 +23,46 @@ def test_float32_products_are_not_rounded_to_tf32():
     assert jax.config.jax_default_matmul_precision in ("highest", "float32")
 
 
+def _lu_calls(jaxpr) -> int:
+    """``lu`` equations in a jaxpr and all of its sub-jaxprs (loops, conds, calls)."""
+    from jax.extend import core as jcore
+
+    count = 0
+    for eqn in jaxpr.eqns:
+        count += eqn.primitive.name == "lu"
+        for value in eqn.params.values():
+            for x in value if isinstance(value, (tuple, list)) else (value,):
+                if isinstance(x, jcore.ClosedJaxpr):
+                    count += _lu_calls(x.jaxpr)
+                elif isinstance(x, jcore.Jaxpr):
+                    count += _lu_calls(x)
+    return count
+
+
+def test_non_symmetric_step_factorises_once():
+    """The continuation step of a non-conservative scene solves two systems (the shifted flow
+    and plain Newton). Two LU custom calls let XLA:CPU run them at once, and jaxlib 0.10's
+    batched LAPACK kernels then deadlock on a 2-core machine (both wait on sub-tasks queued to
+    the same two-thread pool); the step must factorise both matrices in one call."""
+    import pacjax as pj
+    from pacjax._equilibrium import SolverOptions, solve_core
+
+    force = pj.PointForce((0.0, 0.0, 1.0), segment=0, s=1.0, follower=True)
+    scene = pj.presets.stella2023(pj.PAC(), n_sections=1, loads=(force,), quadrature_points=4)
+    u = jnp.zeros((4, scene.n_tendons))
+    q = jnp.zeros((4, scene.n_dofs))
+    solve = jax.vmap(lambda a, b: solve_core(scene, a, b, SolverOptions()))
+    assert _lu_calls(jax.make_jaxpr(solve)(u, q).jaxpr) == 1
+
+
 @pytest.mark.slow
-@pytest.mark.expensive  # OPEN DEFECT: hangs on 2 cores (every thread waiting); not run in CI
 def test_follower_force_batch_does_not_hang():
     """The batched solve of the paper study's follower-force data (seed 0, 16 frames) hung on
-    2 cores in 7 of 10 runs, every thread waiting inside the first compiled call of
-    ``solve_batch`` (``py-spy``) after about 80 s of CPU time: 5 of 5 with XLA's defaults, 2 of
-    5 with single-threaded Eigen (``--xla_cpu_multi_thread_eigen=false``), so that flag is no
-    fix. A hang fails this test at the subprocess timeout instead of stalling the run."""
+    2 cores in 7 of 10 runs: gdb showed every XLA:CPU pool thread inside a batched LU
+    (``LuDecompositionKernel -> ParallelBatchMap -> BlockingCounter::Wait``), the flow and the
+    Newton systems of one continuation step factorised by two concurrent calls. With one
+    factorisation it finished in 59-69 s (6 of 6). A hang fails this test at the subprocess
+    timeout instead of stalling the run."""
     code = """
         import numpy as np
         import pacjax as pj
