@@ -367,26 +367,21 @@ def _optimise(train, theta, current, optimizer, max_iterations, tol, progress, n
     converged, message = False, "iteration limit reached"
     iterations = 0
     if isinstance(optimizer, str):
-        damping, rejected = 1e-3, 0
+        lm = _LevenbergMarquardt()
         while iterations < max_iterations:
             r = current.r[current.valid].reshape(-1)
             jac = current.j[current.valid].reshape(r.size, -1)
-            jtj, g = jac.T @ jac, jac.T @ r
-            diag = np.maximum(np.diag(jtj), 1e-12 * max(np.max(np.diag(jtj)), 1e-300))
-            step = np.linalg.solve(jtj + damping * np.diag(diag), -g)
-            predicted = -(g @ step + 0.5 * step @ jtj @ step)  # decrease of the linear model
+            step, predicted = lm.step(jac, r)
             if predicted <= tol * current.cost():
                 converged, message = True, "converged (no decrease left to gain)"
                 break
             trial = train(theta + step, q0=current.q)
             ok = bool(np.all(trial.valid[current.valid]))
-            if ok and trial.cost(current.valid) < current.cost():
-                decrease = (current.cost() - trial.cost(current.valid)) / max(
-                    current.cost(), 1e-300
-                )
+            actual = current.cost() - trial.cost(current.valid) if ok else -np.inf
+            if lm.update(actual / predicted, np.max(np.abs(step)), ok):
+                decrease = actual / max(current.cost(), 1e-300)
                 theta, current = theta + step, trial
                 iterations += 1
-                damping, rejected = max(damping / 3.0, 1e-12), 0
                 losses.append(current.cost() / n_obs)
                 rmse.append(_rmse_mm(current.pred, markers))
                 bar.update()
@@ -394,16 +389,14 @@ def _optimise(train, theta, current, optimizer, max_iterations, tol, progress, n
                 if np.max(np.abs(step)) < np.sqrt(tol) or decrease < tol:
                     converged, message = True, "converged (step or loss change below tolerance)"
                     break
-            else:
-                damping, rejected = damping * 4.0, rejected + 1
-                if rejected >= 5:
-                    converged = ok
-                    message = (
-                        "converged (no step reduces the loss further: at the solver's accuracy)"
-                        if ok
-                        else "stopped: equilibria fail to converge along every trial step"
-                    )
-                    break
+            elif lm.rejected >= _LevenbergMarquardt.MAX_REJECTED:
+                converged = ok
+                message = (
+                    "converged (no step reduces the loss further: at the solver's accuracy)"
+                    if ok
+                    else "stopped: equilibria fail to converge along every trial step"
+                )
+                break
     else:
         state = optimizer.init(theta)
         while iterations < max_iterations:
@@ -428,6 +421,59 @@ def _optimise(train, theta, current, optimizer, max_iterations, tol, progress, n
     bar.close()
 
     return theta, current, (losses, rmse), (iterations, converged, message)
+
+
+class _LevenbergMarquardt:
+    """Damping and step bound of the fit's Levenberg-Marquardt iterations.
+
+    The residuals come from a batch of equilibria, warm-started from the current ones, and a
+    trial point whose equilibria fail is a rejected step, so the loop stays here rather than in
+    ``optimistix``. Two safeguards keep a poor linear model from throwing the fit far out:
+
+    - the damping follows the gain ratio ``rho`` (actual over predicted decrease; Nielsen's
+      update, Madsen, Nielsen & Tingleff 2004, eq. 3.15): a step that lowers the loss but far
+      less than predicted raises the damping instead of lowering it;
+    - no internal coordinate moves by more than ``radius`` per step (log-scaled parameters by
+      a factor ``e`` at most at the start). The radius halves on a rejected or poor step and
+      doubles, up to :attr:`MAX_RADIUS`, on a good one.
+
+    Without them the follower-force fit of the paper study took one step that raised
+    ``tendon_gain`` 4-35x past the truth and ``stiffening`` 5x, from where every trial point
+    had frames whose equilibria failed.
+    """
+
+    MAX_RADIUS = 4.0
+    MAX_REJECTED = 8
+
+    def __init__(self):
+        self.damping, self.nu, self.radius, self.rejected = 1e-3, 2.0, 1.0, 0
+
+    def step(self, jac, r):
+        """The damped Gauss-Newton step, cut back to the radius, and its predicted decrease of
+        ``0.5 |r|^2``."""
+        jtj, g = jac.T @ jac, jac.T @ r
+        diag = np.maximum(np.diag(jtj), 1e-12 * max(np.max(np.diag(jtj)), 1e-300))
+        step = np.linalg.solve(jtj + self.damping * np.diag(diag), -g)
+        size = np.max(np.abs(step))
+        if size > self.radius:
+            step = step * (self.radius / size)
+        return step, -(g @ step + 0.5 * step @ jtj @ step)
+
+    def update(self, rho: float, size: float, ok: bool) -> bool:
+        """Adapt to the gain ratio of the step just tried; True when it is accepted."""
+        if ok and rho > 1e-3:
+            self.damping = max(self.damping * max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3), 1e-12)
+            self.nu, self.rejected = 2.0, 0
+            if rho > 0.75:
+                self.radius = min(max(self.radius, 2.0 * size), self.MAX_RADIUS)
+            elif rho < 0.25:
+                self.radius = 0.5 * size
+            return True
+        self.damping *= self.nu
+        self.nu *= 2.0
+        self.radius = 0.5 * size
+        self.rejected += 1
+        return False
 
 
 def _rmse_mm(pred: np.ndarray, measured: np.ndarray) -> float:
