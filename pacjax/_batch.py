@@ -234,10 +234,11 @@ def iter_batch(
             part = buffers.pop(next_chunk)
             next_chunk += 1
             eq = jtu.tree_map(jnp.asarray, part.eq)
-            if fallback and opts.method == "ptc" and not np.all(part.eq.converged):
+            retry = fallback or not scene.is_conservative
+            if retry and opts.method == "ptc" and not np.all(part.eq.converged):
                 u = controls_batch[part.rows]
                 p = None if params is None else jtu.tree_map(lambda x, r=part.rows: x[r], params)
-                eq = _retry_failed(scene, u, part.q_start, p, update, opts, eq, dtype)
+                eq = _retry_failed(scene, u, part.q_start, p, update, opts, eq, dtype, fallback)
             yield part.rows, eq
 
 
@@ -368,10 +369,11 @@ def _run_chunk(scene, u, q, p, update, opts, chunk, dtype, sharding, conservativ
     return jtu.tree_map(lambda x: x[:m], eq)
 
 
-def _retry_failed(scene, u, q, p, update, opts, eq, dtype):
+def _retry_failed(scene, u, q, p, update, opts, eq, dtype, flow=True):
     """Re-solve the rows that failed, keeping whichever converged: for a non-conservative scene
     first by load continuation (from the equilibrium of its conservative part, see
-    :func:`pacjax._equilibrium.conservative_part`), then with the diffrax flow."""
+    :func:`pacjax._equilibrium.conservative_part`), then, with ``flow``, with the diffrax
+    flow."""
 
     def solve_rows(rows, starts, options, conservative=False):
         pb = None if p is None else jtu.tree_map(lambda x: x[rows], p)
@@ -393,7 +395,7 @@ def _retry_failed(scene, u, q, p, update, opts, eq, dtype):
         retry = load_continuation(lambda cons, start: solve_rows(bad, start, opts, cons), q[bad])
         eq = merge(eq, bad, retry)
     bad = np.flatnonzero(~np.asarray(eq.converged))
-    if bad.size:
+    if flow and bad.size:
         eq = merge(eq, bad, solve_rows(bad, q[bad], dataclasses.replace(opts, method="flow")))
     return eq
 
@@ -426,7 +428,8 @@ def solve_batch(
             (the first ``chunk_size`` rows start straight; helps on grids and paths).
         devices: number of devices to shard each chunk over (default all).
         progress: show a progress bar (default: when there is more than one chunk).
-        fallback: re-solve rows that failed with the diffrax flow.
+        fallback: re-solve rows that failed with the diffrax flow. Failed rows of a
+            non-conservative scene are first re-solved by load continuation whatever it says.
         **options: :class:`SolverOptions` fields.
     """
     parts = iter_batch(

@@ -121,11 +121,12 @@ def fit(
         for label, value, std in zip(p["labels"], p["value"], p["std"], strict=True):
             sd = "" if std is None else f" +- {std:.3g}"
             click.echo(f"  {pname}{label} = {value:.6g}{sd} {p['unit']}")
-    click.echo(f"train RMSE {report.train.rmse_mm:.3f} mm ({len(report.train.q)} frames)")
-    if report.validation is not None:
-        click.echo(
-            f"held-out RMSE {report.validation.rmse_mm:.3f} mm ({len(report.validation.q)} frames)"
-        )
+    for label, errors in (("train", report.train), ("held-out", report.validation)):
+        if errors is None:
+            continue
+        failed = int((~errors.converged).sum())
+        note = f", {failed} not converged: not in the RMSE" if failed else ""
+        click.echo(f"{label} RMSE {errors.rmse_mm:.3f} mm ({len(errors.q)} frames{note})")
     for path in paths.values():
         click.echo(f"wrote {path}")
 

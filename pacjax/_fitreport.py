@@ -14,10 +14,12 @@ class FitErrors:
     """Prediction errors of a fitted model on a set of frames (mocap frame, fitted transform).
 
     Attributes:
-        frame_rmse_mm: (frames,) RMS marker distance error per frame (mm).
+        frame_rmse_mm: (frames,) RMS marker distance error per frame (mm; NaN for a frame
+            whose equilibrium did not converge).
         marker_rmse_mm: (m,) RMS distance error per marker (mm).
-        rmse_mm, mean_mm, max_mm: over every observed marker of every frame (mm).
-        tip_error_mm: (frames,) distance error of the most distal marker (mm; NaN if unseen).
+        rmse_mm, mean_mm, max_mm: over every observed marker of every converged frame (mm).
+        tip_error_mm: (frames,) distance error of the most distal marker (mm; NaN if unseen
+            or not converged).
         orientation_error_deg: (frames, m) angle between predicted and measured rotation
             (degrees), or None without orientation data.
         tip_frobenius: (frames,) ``||R_pred - R_meas||_F`` at the most distal site, or None.
@@ -42,6 +44,9 @@ class FitErrors:
     @staticmethod
     def compute(predicted, measured, tip_index, converged, q, rot_pred=None, rot_meas=None):
         dist = np.linalg.norm(predicted - measured, axis=-1) * 1e3  # NaN where unobserved
+        # A frame whose equilibrium failed has no prediction (its markers are those of the
+        # start): it is counted in ``converged``, not mixed into the errors.
+        dist = np.where(np.asarray(converged, bool)[:, None], dist, np.nan)
         seen = np.isfinite(dist)
         sq = np.where(seen, dist**2, 0.0)
         with np.errstate(invalid="ignore", divide="ignore"):
@@ -53,12 +58,15 @@ class FitErrors:
             cos = np.clip((np.trace(rel, axis1=-2, axis2=-1) - 1.0) / 2.0, -1.0, 1.0)
             ori = np.degrees(np.arccos(cos))
             frob = np.linalg.norm(rot_pred[:, tip_index] - rot_meas[:, tip_index], axis=(-2, -1))
+            ok = np.asarray(converged, bool)
+            ori, frob = np.where(ok[:, None], ori, np.nan), np.where(ok, frob, np.nan)
+        any_seen = bool(seen.any())  # False when no frame converged
         return FitErrors(
             frame_rmse_mm=frame,
             marker_rmse_mm=marker,
-            rmse_mm=float(np.sqrt(sq.sum() / seen.sum())),
-            mean_mm=float(np.nanmean(dist)),
-            max_mm=float(np.nanmax(dist)),
+            rmse_mm=float(np.sqrt(sq.sum() / seen.sum())) if any_seen else np.nan,
+            mean_mm=float(np.nanmean(dist)) if any_seen else np.nan,
+            max_mm=float(np.nanmax(dist)) if any_seen else np.nan,
             tip_error_mm=dist[:, tip_index],
             orientation_error_deg=ori,
             tip_frobenius=frob,
@@ -71,9 +79,9 @@ class FitErrors:
     def summary(self) -> dict:
         out = {
             "frames": int(len(self.frame_rmse_mm)),
-            "rmse_mm": self.rmse_mm,
-            "mean_mm": self.mean_mm,
-            "max_mm": self.max_mm,
+            "rmse_mm": _scalar(self.rmse_mm),
+            "mean_mm": _scalar(self.mean_mm),
+            "max_mm": _scalar(self.max_mm),
             "tip_mean_mm": _nanmean(self.tip_error_mm),
             "frame_rmse_mm": _list(self.frame_rmse_mm),
             "marker_rmse_mm": _list(self.marker_rmse_mm),
@@ -84,6 +92,10 @@ class FitErrors:
             out["orientation_mean_deg"] = _nanmean(self.orientation_error_deg)
             out["tip_frobenius_mean"] = _nanmean(self.tip_frobenius)
         return out
+
+
+def _scalar(x) -> float | None:
+    return float(x) if math.isfinite(x) else None
 
 
 def _nanmean(x) -> float | None:
@@ -193,16 +205,19 @@ class IdentificationReport:
             ]
             lines += ["", f"Not identified by these data (relative std > 100 %): {', '.join(bad)}."]
         lines += ["", "## Errors (mm; markers in the mocap frame)", ""]
-        lines.append("| frames | n | RMSE | mean | max | tip mean | orientation mean (deg) |")
-        lines.append("|---|---|---|---|---|---|---|")
+        lines.append(
+            "| frames | n | not converged | RMSE | mean | max | tip mean | orientation mean (deg) |"
+        )
+        lines.append("|---|---|---|---|---|---|---|---|")
         for label, e in (("train", self.train), ("held-out", self.validation)):
             if e is None:
                 continue
             s = e.summary()
             ori = s.get("orientation_mean_deg")
             lines.append(
-                f"| {label} | {s['frames']} | {s['rmse_mm']:.3f} | {s['mean_mm']:.3f} | "
-                f"{s['max_mm']:.3f} | {_fmt(s['tip_mean_mm'])} | {_fmt(ori)} |"
+                f"| {label} | {s['frames']} | {len(s['frames_not_converged'])} | "
+                f"{_fmt(s['rmse_mm'])} | {_fmt(s['mean_mm'])} | {_fmt(s['max_mm'])} | "
+                f"{_fmt(s['tip_mean_mm'])} | {_fmt(ori)} |"
             )
         lines += [
             "",

@@ -83,7 +83,7 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
     symmetric: bool = True
     # When True, ``args.linearise(y) -> (jacobian, (r, aux))`` gives the residual and its
     # Jacobian together (the structured Hessian of :mod:`pacjax._hessian`) instead of jacfwd,
-    # and ``args.energy(y)`` the merit alone.
+    # and, for a symmetric (conservative) problem, ``args.energy(y)`` the merit alone.
     structured: bool = False
 
     def init(self, fn, y, args, options, f_struct, aux_struct, tags):
@@ -178,7 +178,7 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
         # conservative scene is the energy without its gradient (a third of the cost). Under
         # vmap every row of a batch is at the same alpha in a given trial, so this split costs
         # no evaluation of the other kind.
-        if self.structured:
+        if self.structured and self.symmetric:
             merit_only = args.energy
         else:
 

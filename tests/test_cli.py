@@ -80,6 +80,30 @@ def test_solve_controls_override(tmp_path):
     assert data["tip"]["position"][1] < 0
 
 
+@pytest.mark.slow  # compiles the implicit integrator (Kvaerno5) for one segment
+def test_simulate_settles_on_the_solve_and_writes_its_files(tmp_path):
+    """A step in tendon tensions, damped at the critical ratio of the lowest mode: after 1 s
+    (about 10 of its periods) the tip is where `pacjax solve` puts it."""
+    scene_file = SCENES / "tendon_single.toml"
+    result = run(
+        "simulate", scene_file, "--duration", "1.0", "--damping-ratio", "1.0", "--fps", "10",
+        "--out", tmp_path,
+    )  # fmt: skip
+    assert result.exit_code == 0, result.output
+    data = json.loads((tmp_path / "tendon_single_sim.json").read_text())
+    assert data["success"] is True
+    assert data["t"] == pytest.approx(np.linspace(0.0, 1.0, 11).tolist())
+    assert (tmp_path / "tendon_single_tip.png").read_bytes()[:8] == PNG_MAGIC
+    assert (tmp_path / "tendon_single_sim.gif").read_bytes()[:6] in (b"GIF87a", b"GIF89a")
+    tips = np.asarray(data["tip_position"])
+    assert tips.shape == (11, 3)
+    # it moves: the start is the equilibrium under zero controls
+    assert np.linalg.norm(tips[-1] - tips[0]) > 5e-3
+    assert run("solve", scene_file, "--out", tmp_path).exit_code == 0
+    solved = json.loads((tmp_path / "tendon_single.json").read_text())
+    assert np.linalg.norm(tips[-1] - np.asarray(solved["tip"]["position"])) < 1e-4
+
+
 @pytest.mark.parametrize(
     "args, code, message",
     [
@@ -90,6 +114,9 @@ def test_solve_controls_override(tmp_path):
         (["solve", "{scene}", "--controls", "-1,0,0"], 1, "must be >= 0"),
         (["solve", "{broken}"], 1, "tendons[0].segment: segment 5 does not exist"),
         (["nonsense"], 2, "No such command"),
+        (["simulate", "{scene}", "--controls", "0.01,0"], 1, "2 value(s) but the scene has 3"),
+        (["simulate", "{broken}"], 1, "tendons[0].segment: segment 5 does not exist"),
+        (["simulate", "{scene}", "--duration", "0"], 2, "Invalid value for '--duration'"),
     ],
 )
 def test_bad_input_one_line_no_traceback(tmp_path, args, code, message):

@@ -279,6 +279,31 @@ def test_random_extreme_scenes_never_return_silent_nan(ei, gain, mass, g, mount,
     _assert_explicit(eq, grad, TOLS[dtype])
 
 
+def test_structured_jacobian_of_a_non_conservative_scene_is_the_autodiff_one():
+    """The solver's Jacobian of a scene with a follower force and a local moment: structured
+    Hessian of the energy minus the forward derivative of those loads alone, equal to
+    ``jax.jacfwd`` of the whole residual."""
+    from pacjax._equilibrium import _Scaled
+
+    loads = (
+        pj.PointForce((0.5, 0.0, 2.0), segment=1, s=1.0, follower=True),
+        pj.PointMoment((0.0, 0.02, 0.01), segment=0, s=0.7, follower=True),
+    )
+    scene = pj.presets.stella2023(pj.PAC(), n_sections=2, loads=loads, quadrature_points=4)
+    assert not scene.is_conservative
+    u = jnp.asarray(np.random.default_rng(3).uniform(0.0, 0.01, scene.n_tendons))
+    problem = _Scaled.build(scene, u)
+    y = jnp.asarray(np.random.default_rng(4).normal(size=scene.n_dofs)) * 0.3
+    jac, (r, (merit, _)) = eqx.filter_jit(lambda p, x: p.linearise(x))(problem, y)
+    expected, residual = eqx.filter_jit(lambda p, x: (jax.jacfwd(p.residual)(x), p.residual(x)))(
+        problem, y
+    )
+    np.testing.assert_allclose(r, residual, rtol=1e-12, atol=1e-12)
+    assert float(merit) == pytest.approx(0.5 * float(jnp.sum(r * r)), rel=1e-12)
+    scale = float(jnp.max(jnp.abs(expected)))
+    assert float(jnp.max(jnp.abs(jac - expected))) < 1e-10 * scale
+
+
 def test_follower_force_is_reached_by_load_continuation():
     # The paper's single section with a 3.41 N follower force along the body at the tip and
     # random pull-ins: from the straight start, the residual-norm merit of a non-conservative
@@ -289,6 +314,11 @@ def test_follower_force_is_reached_by_load_continuation():
     commands = np.random.default_rng(1).uniform(0.0, 0.02, (2, 3))
     batch = pj.solve_batch(scene, commands)
     assert np.all(batch.converged)
+    # Load continuation is not the diffrax fallback: it also runs with fallback=False, which
+    # the fits and multistart solves use (a frame of the paper study's follower-force fit
+    # failed at every iteration without it).
+    assert np.all(pj.solve_batch(scene, commands, fallback=False).converged)
+    assert bool(pj.solve_equilibrium(scene, commands[1], fallback=False).converged)
     for u, q in zip(commands, batch.q, strict=True):
         single = pj.solve_equilibrium(scene, u)
         assert bool(single.converged)

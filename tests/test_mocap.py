@@ -3,6 +3,7 @@
 No equilibrium is solved here (fast); synthetic data and fits are in test_identify.py.
 """
 
+import json
 import pathlib
 import re
 
@@ -224,3 +225,27 @@ def test_static_frames_settle_criterion():
         pj.MocapDataset.from_time_series(
             t, np.zeros((len(t), 1)), markers + 0.01 * np.sin(50 * t)[:, None, None], [(0, 1.0)]
         )
+
+
+def test_frames_that_did_not_converge_are_not_in_the_errors():
+    """A failed equilibrium has no prediction: the frame is listed as not converged, its errors
+    are NaN and the RMSE is that of the other frames."""
+    from pacjax._fitreport import FitErrors
+
+    measured = np.zeros((3, 2, 3))
+    predicted = measured.copy()
+    predicted[0, :, 0] = 1e-3  # 1 mm off
+    predicted[1, :, 0] = 0.2  # the start configuration of a failed solve
+    predicted[2, :, 0] = -1e-3
+    errors = FitErrors.compute(
+        predicted, measured, 1, np.array([True, False, True]), np.zeros((3, 4))
+    )
+    assert errors.rmse_mm == pytest.approx(1.0)
+    assert errors.max_mm == pytest.approx(1.0)
+    assert np.isnan(errors.frame_rmse_mm[1]) and np.isnan(errors.tip_error_mm[1])
+    summary = errors.summary()
+    assert summary["frames_not_converged"] == [1]
+    assert summary["frame_rmse_mm"][1] is None
+    json.dumps(summary, allow_nan=False)
+    none = FitErrors.compute(predicted, measured, 1, np.zeros(3, bool), np.zeros((3, 4)))
+    assert none.summary()["rmse_mm"] is None
