@@ -149,8 +149,12 @@ class _Scaled(eqx.Module):
         energy, grad, hessian = energy_derivatives(self.scene, q, self.controls, self.consts)
         merit = energy
         if not self.scene.is_conservative:
-            forces = self.scene.nonconservative_forces
-            d_forces, value = jax.jacfwd(lambda x: (forces(x), forces(x)), has_aux=True)(q)
+
+            def forces(x):
+                value = self.scene.nonconservative_forces(x)
+                return value, value
+
+            d_forces, value = jax.jacfwd(forces, has_aux=True)(q)
             grad, hessian = grad - value, hessian - d_forces
             merit = 0.5 * jnp.sum((grad * self.row) ** 2)
         jac = self.row[:, None] * hessian * self.sigma[None, :]
