@@ -220,7 +220,9 @@ def run_all(todo, args) -> None:
             key, _, _ = pending.pop(0)
             slot = free.pop(0)
             cmd = [sys.executable, __file__, "--task", key, "--n", str(args.n)]
-            cmd += ["--raw", str(args.raw)] + (["--quick"] if args.quick else [])
+            cmd += ["--raw", str(args.raw), "--loads", args.loads]
+            cmd += ["--follower-reference", args.follower_reference]
+            cmd += ["--quick"] if args.quick else []
             cores = slots[slot]
             pre = (lambda c=cores: os.sched_setaffinity(0, c)) if cores else None
             log = open(args.raw / f"{key}.log", "w")  # noqa: SIM115 (closed when it ends)
@@ -246,9 +248,10 @@ def merge(todo, n: int, raw: Path) -> dict:
         return meta, arrays
 
     loads = sorted({load for _, _, load in todo})
-    reference = {load: read(f"reference-{load}")[1] for load in loads}
+    references = {load: read(f"reference-{load}") for load in loads}
+    reference = {load: arrays for load, (_, arrays) in references.items()}
     rows, missing = [], []
-    ref_meta = next((m for m in (read(f"reference-{x}")[0] for x in loads) if m), {})
+    ref_meta = next((meta for meta, _ in references.values() if meta), {})
     for key, config, load in todo:
         if key.startswith("reference"):
             continue
