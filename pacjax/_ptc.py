@@ -23,6 +23,7 @@ import jax.numpy as jnp
 import optimistix as optx
 from jaxtyping import Array, Bool, Float, Int
 
+from . import _linalg
 from ._solution import MAX_STEPS, NONFINITE, STALLED, SUCCESS
 
 _MIN_DT = 1e-10
@@ -62,7 +63,7 @@ def stiffness_modes(jac, weights, size, tol):
     with several unstable modes (one per segment of a robot) is left in one go.
     """
     k = (weights[:, None] * jac) / weights[None, :]
-    eigvals, eigvecs = jnp.linalg.eigh(0.5 * (k + k.T))
+    eigvals, eigvecs = _linalg.eigh(0.5 * (k + k.T))
     unstable = (eigvals < -tol).at[0].set(True)
     dy = (eigvecs @ jnp.where(unstable, 1.0, 0.0)) / weights
     dy = size * dy / jnp.maximum(max_abs(dy), jnp.finfo(dy.dtype).tiny)
@@ -148,11 +149,12 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
             # LAPACK kernels then each wait on sub-tasks queued to the same intra-op thread
             # pool: with as many such calls as pool threads (2 on a 2-core machine), every
             # thread waits and the program hangs (seen in gdb: both in LuDecompositionKernel ->
-            # ParallelBatchMap -> BlockingCounter::Wait).
+            # ParallelBatchMap -> BlockingCounter::Wait). pacjax._linalg keeps every call
+            # below the size that takes that path; one call is also cheaper than two.
             dt_safe = jnp.where(state.eig < 0, jnp.minimum(state.dt, 0.5 / -state.eig), state.dt)
             matrices = jnp.stack([state.jacobian + eye / dt_safe, state.jacobian])
             rhs = jnp.broadcast_to(-state.residual[:, None], (2, y.shape[0], 1))
-            flow, full = jnp.linalg.solve(matrices, rhs)[..., 0]
+            flow, full = _linalg.solve(matrices, rhs)[..., 0]
 
             def try_newton():
                 r_full, _ = fn(y + full, args)

@@ -73,3 +73,40 @@ def test_solve_batch_on_two_cpu_devices_matches_one_device():
     assert out["chunk_rows"] == 4 and out["pool_devices"] == [2]
     assert all(out["converged_two"]) and all(out["converged_one"])
     np.testing.assert_allclose(out["two"], out["one"], rtol=0, atol=1e-12)
+
+
+PAPER_ROBOT = r"""
+import json
+import jax
+import numpy as np
+import pacjax as pj
+from pacjax.bench import random_commands
+
+assert len(jax.devices()) == 2, jax.devices()
+scene = pj.presets.stella2023(pj.PAC(), tip_mass=0.2)
+commands = random_commands(96)
+eq = pj.solve_batch(scene, commands, chunk_size=96, progress=False)
+print(json.dumps({"converged": np.asarray(eq.converged).tolist(), "q": np.asarray(eq.q).tolist()}))
+"""
+
+
+@pytest.mark.slow  # two compilations of the paper's robot in a fresh interpreter
+def test_paper_robot_sharded_over_two_cpu_devices_does_not_hang():
+    """48 slots per device of a 12 x 12 eigen-decomposition: past jaxlib 0.10's threshold for
+    its parallel LAPACK path, which hung when both devices took it at once (pacjax._linalg).
+    Before the fix this run waited forever at 0 % CPU; now it takes about a minute."""
+    env = dict(os.environ)
+    env["XLA_FLAGS"] = env.get("XLA_FLAGS", "") + " --xla_force_host_platform_device_count=2"
+    env["JAX_PLATFORMS"] = "cpu"
+    env.pop("PACJAX_CACHE_DIR", None)
+    proc = subprocess.run(
+        [sys.executable, "-c", PAPER_ROBOT], env=env, capture_output=True, text=True, timeout=600
+    )
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    out = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert all(out["converged"])
+    import pacjax as pj
+    from pacjax.bench import random_commands
+
+    one = pj.solve_batch(pj.presets.stella2023(pj.PAC(), tip_mass=0.2), random_commands(96)[:8])
+    np.testing.assert_allclose(np.asarray(out["q"])[:8], np.asarray(one.q), rtol=0, atol=1e-8)
