@@ -26,6 +26,14 @@ def section_stiffness(
     return bending, torsion
 
 
+def _bending_torsion_energy(model, length, weights, bending, torsion, strain):
+    """``1/2 int_0^1 (EI |u_bend|^2 + GJ u_twist^2) / L ds`` of strain values at the nodes."""
+    energy = 0.5 / length * jnp.sum(weights * bending * (strain[:, 0] ** 2 + strain[:, 1] ** 2))
+    if model.has_twist_strain():
+        energy = energy + 0.5 / length * jnp.sum(weights * torsion * strain[:, 2] ** 2)
+    return energy
+
+
 def segment_elastic_energy(
     model: StrainModel,
     segment: Segment,
@@ -55,15 +63,55 @@ def segment_elastic_energy(
     if segment.stiffening is not None:
         bending = bending * segment.stiffening(elongation, length)
 
-    energy = 0.5 / length * jnp.sum(weights * bending * (strain[:, 0] ** 2 + strain[:, 1] ** 2))
-    if model.has_twist_strain():
-        energy = energy + 0.5 / length * jnp.sum(weights * torsion * strain[:, 2] ** 2)
+    energy = _bending_torsion_energy(model, length, weights, bending, torsion, strain)
     extra = model.coordinate_energy(q, segment.torsion_stiffness.astype(q.dtype) / length)
     if extra is not None:
         energy = energy + extra
     axial = segment.axial_stiffness.astype(q.dtype)
     stop = contraction_stop_energy(elongation, segment.contraction_limit.astype(q.dtype), axial)
     return energy + 0.5 * axial * elongation**2 + stop
+
+
+def segment_strain_rate_energy(
+    model: StrainModel,
+    segment: Segment,
+    q: Float[Array, " d"],
+    qdot: Float[Array, " d"],
+    quadrature_points: int,
+    stiffness: tuple[Float[Array, " p"], Float[Array, " p"]] | None = None,
+) -> Float[Array, ""]:
+    """The elastic energy's quadratic form evaluated on the strain *rates* at ``(q, qdot)``.
+
+    ``1/2 int (EI |du_bend/dt|^2 + GJ (du_twist/dt)^2) / L ds + 1/2 k_a (dL/dt)^2`` (stiffening
+    at the current elongation), plus the non-strain coordinates' stiffness at zero (PAC's
+    ``phi`` regulariser) on their rates. Times a damping time ``beta`` it is a Kelvin-Voigt
+    material's dissipation function, ``1/2 qdot^T beta J(q)^T K J(q) qdot`` with ``J`` the strain
+    Jacobian: it depends on the motion of the material, not on the coordinates. At the straight
+    rest configuration it is ``1/2 qdot^T K_0 qdot``; away from it, the bending-plane angle of
+    PCC/PAC is damped by the curvature it rotates (``|u| dphi/dt``), which ``K_0`` (where
+    ``phi`` has no strain) leaves undamped.
+    """
+    nodes, weights = gauss_legendre(quadrature_points)
+    nodes = jnp.asarray(nodes, q.dtype)
+    weights = jnp.asarray(weights, q.dtype)
+    length = segment.length.astype(q.dtype)
+
+    def strains(x):
+        return jax.vmap(model.strain, in_axes=(None, 0))(x, nodes), model.elongation(x)
+
+    (_, elongation), (strain_rate, elongation_rate) = jax.jvp(strains, (q,), (qdot,))
+    if stiffness is None:
+        stiffness = section_stiffness(segment, quadrature_points, q.dtype)
+    bending, torsion = stiffness
+    if segment.stiffening is not None:
+        bending = bending * segment.stiffening(elongation, length)
+    rate = _bending_torsion_energy(model, length, weights, bending, torsion, strain_rate)
+    k_coord = segment.torsion_stiffness.astype(q.dtype) / length
+    if model.coordinate_energy(q, k_coord) is not None:
+        hess = jax.hessian(lambda x: model.coordinate_energy(x, k_coord))(jnp.zeros_like(q))
+        rate = rate + 0.5 * qdot @ hess @ qdot
+    axial = segment.axial_stiffness.astype(q.dtype)
+    return rate + 0.5 * axial * elongation_rate**2
 
 
 #: Width of the contraction stop's contact band, as a fraction of the contraction limit.
@@ -91,6 +139,22 @@ def contraction_stop_energy(
     return jnp.where(x >= 1, jnp.inf, energy)
 
 
+def _sum_over_segments(per_segment, robot: Robot, quadrature_points, stiffness, *arrays):
+    """``sum_i per_segment(segment_i, arrays[.][i], stiffness_i)``: one ``vmap`` when the
+    segments share a structure."""
+    segments = robot.segments
+    if stiffness is None:
+        stiffness = robot_section_stiffness(robot, quadrature_points, arrays[0].dtype)
+    structures = {jtu.tree_structure(seg) for seg in segments}
+    if len(structures) == 1:
+        stacked = jtu.tree_map(lambda *xs: jnp.stack(xs), *segments)
+        return jnp.sum(jax.vmap(per_segment)(stacked, *arrays, stiffness))
+    return sum(
+        per_segment(seg, *(a[i] for a in arrays), (stiffness[0][i], stiffness[1][i]))
+        for i, seg in enumerate(segments)
+    )
+
+
 def elastic_energy(
     model: StrainModel,
     robot: Robot,
@@ -102,22 +166,27 @@ def elastic_energy(
 
     ``stiffness``: every segment's :func:`section_stiffness`, stacked, when already computed.
     """
-    segments = robot.segments
-    if stiffness is None:
-        stiffness = robot_section_stiffness(robot, quadrature_points, q.dtype)
-    structures = {jtu.tree_structure(seg) for seg in segments}
-    if len(structures) == 1:
-        stacked = jtu.tree_map(lambda *xs: jnp.stack(xs), *segments)
-        per_segment = jax.vmap(
-            lambda seg, qi, k: segment_elastic_energy(model, seg, qi, quadrature_points, k)
-        )(stacked, q, stiffness)
-        return jnp.sum(per_segment)
-    return sum(
-        segment_elastic_energy(
-            model, seg, q[i], quadrature_points, (stiffness[0][i], stiffness[1][i])
-        )
-        for i, seg in enumerate(segments)
-    )
+
+    def one(seg, qi, k):
+        return segment_elastic_energy(model, seg, qi, quadrature_points, k)
+
+    return _sum_over_segments(one, robot, quadrature_points, stiffness, q)
+
+
+def strain_rate_energy(
+    model: StrainModel,
+    robot: Robot,
+    q: Float[Array, "n d"],
+    qdot: Float[Array, "n d"],
+    quadrature_points: int,
+    stiffness: tuple[Float[Array, "n p"], Float[Array, "n p"]] | None = None,
+) -> Float[Array, ""]:
+    """:func:`segment_strain_rate_energy` summed over the segments."""
+
+    def one(seg, qi, vi, k):
+        return segment_strain_rate_energy(model, seg, qi, vi, quadrature_points, k)
+
+    return _sum_over_segments(one, robot, quadrature_points, stiffness, q, qdot)
 
 
 def robot_section_stiffness(

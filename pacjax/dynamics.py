@@ -6,9 +6,11 @@
   differentiation (:mod:`pacjax._inertia`); ``G + K`` is the gradient of the scene's potential
   energy without its tendons (elasticity, gravity, world-fixed forces); ``Q_ext`` the follower
   forces and point moments.
-- ``D`` is Rayleigh damping (:class:`Damping`): ``alpha M(q) + beta K_0``, ``K_0`` the Hessian
-  of the elastic energy of the straight robot at rest. Default: stiffness-proportional, with
-  ``beta`` giving a 5 % damping ratio to the lowest mode of the straight, unloaded body.
+- ``D`` is Rayleigh damping (:class:`Damping`): ``alpha M(q) + beta K(q)``, with
+  ``K(q) = J(q)^T K_s J(q)`` the elastic stiffness seen by the strain rates (``J`` the strain
+  Jacobian, ``K_s`` the section stiffness): a Kelvin-Voigt material's damping, ``K_0`` at the
+  straight rest configuration. Default: stiffness-proportional, with ``beta`` giving a 5 %
+  damping ratio to the lowest mode of the straight, unloaded body.
 - Tendons: ``A(q) f_act = -(dl/dq)^T tau`` with the motor PD law
   ``tau = max(kappa_P (l - l_bar) + kappa_D (l_dot - l_bar_dot), 0)``, ``l_bar = l_rest - u(t)``:
   the paper's ``f_act = kappa_D (l_bar_dot - l_dot) + kappa_P (l_bar - l)`` taken as the pull of
@@ -36,6 +38,7 @@ import lineax as lx
 import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
+from ._energy import strain_rate_energy
 from ._equilibrium import (
     as_traced_leaves,
     check_controls,
@@ -74,8 +77,13 @@ DEFAULT_DAMPING_RATIO = 0.05
 class Damping(eqx.Module):
     """Rayleigh damping of the body and derivative gains of the tendon motors.
 
-    ``D(q) = mass * M(q) + stiffness * K_0`` with ``K_0`` the Hessian of the elastic energy of
-    the straight robot at rest (a constant matrix).
+    ``D(q) = mass * M(q) + stiffness * K(q)``, ``K(q) = J(q)^T K_s J(q)`` the section stiffness
+    ``K_s`` pulled back by the strain Jacobian ``J`` (the damping of a Kelvin-Voigt material,
+    :func:`pacjax._energy.segment_strain_rate_energy`). At the straight rest configuration it
+    is ``K_0``, the Hessian of the elastic energy. It damps every motion that strains the
+    material, whatever the coordinates: a constant ``K_0`` left the bending-plane angle of a
+    bent PCC/PAC segment (a swing across its bending plane) undamped, since that angle has no
+    strain at ``q = 0``.
 
     Args:
         mass: ``alpha`` (1/s), mass-proportional coefficient.
@@ -149,7 +157,6 @@ class _Model(eqx.Module):
     scene: Scene
     passive: Scene  # the scene without its tendons: their force is the motor law
     damping: Damping
-    stiffness_rest: Array  # K_0
     tendon_damping: Array | None
     phi_inertia: float = eqx.field(static=True)
 
@@ -162,9 +169,23 @@ class _Model(eqx.Module):
             quadrature_points=scene.quadrature_points,
             rotation_substeps=scene.rotation_substeps,
         )
-        k0 = jax.hessian(scene.elastic_energy)(scene.zeros(dtype))
         kd = damping.tendon_gains(scene, dtype) if scene.tendons else None
-        return _Model(scene, passive, damping, k0, kd, phi_inertia)
+        return _Model(scene, passive, damping, kd, phi_inertia)
+
+    def material_damping(self, q, qdot):
+        """``K(q) qdot``: the gradient in ``qdot`` of the strain-rate energy."""
+        scene = self.scene
+
+        def rate_energy(v):
+            return strain_rate_energy(
+                scene.model,
+                scene.robot,
+                scene.coordinates(q),
+                scene.coordinates(v),
+                scene.quadrature_points,
+            )
+
+        return jax.grad(rate_energy)(qdot)
 
     def tendon_forces(self, q, qdot, u, udot):
         """``A(q) f_act``: generalised forces of the tendons under the motor PD law."""
@@ -193,7 +214,7 @@ class _Model(eqx.Module):
             force = force + extra
         if self.scene.tendons:
             force = force + self.tendon_forces(q, qdot, u, udot)
-        force = force - self.stiffness_rest @ (self.damping.stiffness * qdot)
+        force = force - self.damping.stiffness * self.material_damping(q, qdot)
         force = force - self.damping.mass * (mass @ qdot)
         operator = lx.MatrixLinearOperator(mass, lx.positive_semidefinite_tag)
         # throw=False: a wild Newton iterate of the implicit solver gives NaN here, and diffrax

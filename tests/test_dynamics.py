@@ -101,6 +101,33 @@ def test_slack_tendon_cannot_push():
     assert jnp.max(jnp.abs(taut - still)) > 0
 
 
+@pytest.mark.parametrize("frame", ["torsion_free", "paper"])
+def test_material_damping_is_kelvin_voigt(frame):
+    """``D(q) = beta J(q)^T K_s J(q)``: ``beta K_0`` at rest, and a bent PCC segment's
+    bending-plane angle is damped by the curvature it rotates (it was undamped with the
+    constant ``K_0``: a slow swing across the bending plane that lasted seconds)."""
+    segment = pj.Segment(0.12, 0.02, 800.0, linear_density=0.3)
+    scene = pj.Scene(pj.Robot([segment]), pj.PCC(frame=frame))
+    model = dyn._Model.build(scene, pj.Damping(stiffness=1.0), 1e-6, jnp.float64)
+    zero = jnp.zeros(scene.n_dofs)
+
+    def damping_matrix(q):
+        return jax.jacfwd(lambda v: model.material_damping(q, v))(zero)
+
+    k0 = jax.hessian(scene.elastic_energy)(zero)
+    np.testing.assert_allclose(damping_matrix(zero), k0, rtol=0, atol=1e-12 * float(k0.max()))
+    c0 = 0.7  # q = [c0, phi, dL]
+    d = damping_matrix(jnp.array([c0, 0.4, 0.0]))
+    if frame == "torsion_free":
+        # the rate of phi rotates the curvature vector: |du/dt| = c0 dphi/dt
+        assert float(d[1, 1]) == pytest.approx(float(k0[0, 0] * c0**2 + k0[1, 1]), rel=1e-12)
+    else:
+        # the paper's frame twists with phi: phi is a torsion, damped as at rest
+        assert float(d[1, 1]) == pytest.approx(float(k0[1, 1]), rel=1e-12)
+    np.testing.assert_allclose(d, d.T, atol=1e-15)
+    assert float(jnp.linalg.eigvalsh(d)[0]) > 0
+
+
 def _cantilever(model, n_segments, ei=0.05, density=0.4, length=0.3):
     segments = [pj.Segment(length / n_segments, ei, 1e5, linear_density=density)] * n_segments
     return pj.Scene(pj.Robot(segments), model), ei, density, length
