@@ -1,7 +1,8 @@
 """Error against run time: which model, quadrature, dtype and tolerance for the paper's robot.
 
 Usage: python experiments/error_vs_runtime/study.py [--n 40] [--quick] [--out DIR]
-       [--jobs J --cores-per-job C] [--time-limit S] [--loads mass,follower]
+       [--jobs J --cores-per-job C] [--time-limit S] [--task-time-limit S]
+       [--loads mass,follower]
        [--follower-reference MODEL] [--merge-only --raw DIR]
 
 Each (configuration, load) is solved in its own process (``--jobs`` at a time, each pinned to
@@ -230,6 +231,11 @@ def run_all(todo, args) -> None:
             running[slot] = (key, proc, log, time.time())
         time.sleep(1.0)
         for slot, (key, proc, log, t0) in list(running.items()):
+            if args.task_time_limit and proc.poll() is None:
+                if time.time() - t0 > args.task_time_limit:  # reported as not run
+                    proc.kill()
+                    proc.wait()
+                    print(f"{key}: stopped after {args.task_time_limit:.0f} s", flush=True)
             if proc.poll() is not None:
                 log.close()
                 print(f"{key}: exit {proc.returncode} after {time.time() - t0:.0f} s", flush=True)
@@ -309,6 +315,9 @@ def main(argv=None) -> None:
     parser.add_argument("--merge-only", action="store_true", help="tables from --raw only")
     parser.add_argument(
         "--time-limit", type=float, default=0.0, help="stop unfinished tasks after S seconds"
+    )
+    parser.add_argument(
+        "--task-time-limit", type=float, default=0.0, help="stop a task after S seconds"
     )
     parser.add_argument(
         "--loads",
@@ -450,7 +459,18 @@ def pareto(rows: list[dict], path: Path) -> None:
         ax.set_ylabel("mean tip error against the reference (mm)")
         ax.set_title(titles[load])
         ax.grid(True, which="both", alpha=0.3)
-    axes[0][-1].legend(loc="center left", bbox_to_anchor=(1.02, 0.5), fontsize=8, frameon=False)
+    labelled = {}  # every configuration once, from whichever panel shows it
+    for ax in axes[0]:
+        for handle, text in zip(*ax.get_legend_handles_labels(), strict=True):
+            labelled.setdefault(text, handle)
+    axes[0][-1].legend(
+        labelled.values(),
+        labelled.keys(),
+        loc="center left",
+        bbox_to_anchor=(1.02, 0.5),
+        fontsize=8,
+        frameon=False,
+    )
     fig.suptitle(
         "Paper's robot: accuracy against run time (filled: 8 points at tol 1e-10 (float64) "
         "or 1e-4 (float32); open diamonds: other settings)",
