@@ -35,6 +35,8 @@ from ._equilibrium import (
     load_continuation,
     make_solver,
     max_total_steps,
+    order_continuation,
+    order_step,
     solve_core,
     solver_dtype,
     start_point,
@@ -372,16 +374,19 @@ def _run_chunk(scene, u, q, p, update, opts, chunk, dtype, sharding, conservativ
 def _retry_failed(scene, u, q, p, update, opts, eq, dtype, flow=True):
     """Re-solve the rows that failed, keeping whichever converged: for a non-conservative scene
     first by load continuation (from the equilibrium of its conservative part, see
-    :func:`pacjax._equilibrium.conservative_part`), then, with ``flow``, with the diffrax
-    flow."""
+    :func:`pacjax._equilibrium.conservative_part`), for ``PolynomialCurvature`` of order >= 2
+    by order continuation (from the equilibrium one order lower, itself retried the same way,
+    see :func:`pacjax._equilibrium.order_step`), then, with ``flow``, with the diffrax flow."""
 
-    def solve_rows(rows, starts, options, conservative=False):
-        pb = None if p is None else jtu.tree_map(lambda x: x[rows], p)
+    def rows_of(x, rows):
+        return None if x is None else jtu.tree_map(lambda a: a[rows], x)
+
+    def solve_rows(rows, starts, options, conservative=False, sc=scene):
         # Padded to a power of two: a batch with a varying number of failures compiles the
         # retry a few times, not once per count.
         size = 1 << (len(rows) - 1).bit_length()
         return _run_chunk(
-            scene, u[rows], starts, pb, update, options, size, dtype, None, conservative
+            sc, u[rows], starts, rows_of(p, rows), update, options, size, dtype, None, conservative
         )
 
     def merge(eq, rows, retry):
@@ -390,9 +395,23 @@ def _retry_failed(scene, u, q, p, update, opts, eq, dtype, flow=True):
             return eq
         return jtu.tree_map(lambda a, b: a.at[rows[better]].set(b[better]), eq, retry)
 
+    if np.all(np.asarray(eq.converged)):
+        return eq
     if not scene.is_conservative:
         bad = np.flatnonzero(~np.asarray(eq.converged))
         retry = load_continuation(lambda cons, start: solve_rows(bad, start, opts, cons), q[bad])
+        eq = merge(eq, bad, retry)
+    step = order_step(scene)
+    bad = np.flatnonzero(~np.asarray(eq.converged))
+    if step is not None and bad.size:
+
+        def solve_low(start):
+            low = solve_rows(bad, start, opts, sc=step.scene)
+            return _retry_failed(
+                step.scene, u[bad], start, rows_of(p, bad), update, opts, low, dtype, flow=False
+            )
+
+        retry = order_continuation(step, solve_low, lambda s: solve_rows(bad, s, opts), q[bad])
         eq = merge(eq, bad, retry)
     bad = np.flatnonzero(~np.asarray(eq.converged))
     if flow and bad.size:

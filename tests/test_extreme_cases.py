@@ -356,3 +356,40 @@ def test_float32_escape_from_a_saddle_ends_at_the_stable_equilibrium():
         tip32 = pj.tip_pose(scene, jnp.asarray(eq32.q, jnp.float64))[0]
         tip64 = pj.tip_pose(scene, eq64.q)[0]
         assert float(jnp.linalg.norm(tip32 - tip64)) < 1e-4  # m
+
+
+def _poly_follower(order):
+    force = pj.PointForce((0.0, 0.0, 3.41), segment=2, s=1.0, follower=True)
+    return pj.presets.stella2023(pj.PolynomialCurvature(order), loads=(force,))
+
+
+def test_order_continuation_reaches_a_row_the_straight_start_misses():
+    """The paper's robot with ``PolynomialCurvature(3)`` under a 3.41 N tip follower force:
+    row 16 of ``random_commands(24, seed=1)`` stalls from the straight start at a scaled
+    residual of 1.4e-2 in 300 steps, and load continuation does not help. Order continuation
+    (from the ``PolynomialCurvature(2)`` equilibrium, embedded) converges, with ``fallback=False``
+    (no diffrax flow), in single and batch solves, to within 1 um of Poly2's tip (the model
+    error of Poly2 under this load is 0.15 um against Poly5)."""
+    from pacjax._equilibrium import order_step
+    from pacjax.bench import random_commands
+
+    commands = random_commands(24, seed=1)
+    scene = _poly_follower(3)
+    step = order_step(scene)
+    assert step is not None and step.low.order == 2 and order_step(_poly_follower(1)) is None
+    low = pj.solve_equilibrium(step.scene, commands[16], fallback=False)
+    assert bool(low.converged)
+    # the maps between the orders are exact
+    q = np.asarray(low.q)
+    np.testing.assert_array_equal(step.truncate(step.embed(q)), q)
+    markers_low = pj.markers(step.scene, low.q)
+    markers = pj.markers(scene, jnp.asarray(step.embed(q)))
+    np.testing.assert_allclose(markers, markers_low, atol=1e-12)
+
+    single = pj.solve_equilibrium(scene, commands[16], fallback=False)
+    assert bool(single.converged) and bool(single.stable)
+    tip_low = np.asarray(pj.tip_pose(step.scene, low.q)[0])
+    assert np.linalg.norm(np.asarray(pj.tip_pose(scene, single.q)[0]) - tip_low) < 1e-6
+    batch = pj.solve_batch(scene, commands[14:18], fallback=False, progress=False)
+    assert bool(np.all(batch.converged))
+    np.testing.assert_allclose(batch.q[2], single.q, atol=1e-8)

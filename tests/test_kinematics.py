@@ -748,3 +748,33 @@ def test_closed_form_plane_frames_match_the_magnus_path(model, monkeypatch):
     magnus = evaluate()
     for a, b in zip(jax.tree.leaves(closed), jax.tree.leaves(magnus), strict=True):
         np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12 * float(np.abs(b).max()))
+
+
+@pytest.mark.parametrize("twist", [False, True])
+def test_order_step_maps_are_exact(twist):
+    """Order continuation starts ``PolynomialCurvature(k)`` from the embedded equilibrium of
+    order ``k - 1``: the embedding (a zero top coefficient per strain component) must give the
+    same configuration, and truncation must undo it."""
+    from pacjax._equilibrium import order_step
+
+    segment = pj.Segment(0.1, 0.01, 500.0, linear_density=0.2)
+    scene = pj.Scene(pj.Robot([segment, segment]), pj.PolynomialCurvature(3, twist=twist))
+    step = order_step(scene)
+    assert step.low == pj.PolynomialCurvature(2, twist=twist)
+    assert step.scene.n_dofs == scene.n_dofs - (6 if twist else 4)
+    q_low = np.random.default_rng(0).normal(size=(4, step.scene.n_dofs))
+    q = step.embed(q_low)
+    assert q.shape == (4, scene.n_dofs)
+    np.testing.assert_array_equal(step.truncate(q), q_low)
+    sites = [(0, 0.3), (0, 1.0), (1, 0.5), (1, 1.0)]
+    for a, b in zip(q_low, q, strict=True):
+        np.testing.assert_allclose(
+            pj.markers(scene, jnp.asarray(b), sites),
+            pj.markers(step.scene, jnp.asarray(a), sites),
+            atol=1e-12,
+        )
+        assert float(scene.elastic_energy(jnp.asarray(b))) == pytest.approx(
+            float(step.scene.elastic_energy(jnp.asarray(a))), rel=1e-12
+        )
+    assert order_step(pj.Scene(pj.Robot([segment]), pj.PolynomialCurvature(1))) is None
+    assert order_step(pj.Scene(pj.Robot([segment]), pj.PAC())) is None
