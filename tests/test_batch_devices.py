@@ -55,8 +55,8 @@ print(json.dumps({
 """
 
 
-@pytest.mark.slow  # over a minute of compilation: CI's slow step
-def test_solve_batch_on_two_cpu_devices_matches_one_device():
+def _on_two_cpu_devices(code: str, timeout: float) -> dict:
+    """Run ``code`` in a fresh interpreter with two host devices; its last line, as JSON."""
     env = dict(os.environ)
     env["XLA_FLAGS"] = env.get("XLA_FLAGS", "") + " --xla_force_host_platform_device_count=2"
     env["JAX_PLATFORMS"] = "cpu"
@@ -64,10 +64,15 @@ def test_solve_batch_on_two_cpu_devices_matches_one_device():
     # read back by the one-device test process (see tests/conftest.py).
     env.pop("PACJAX_CACHE_DIR", None)
     proc = subprocess.run(
-        [sys.executable, "-c", CODE], env=env, capture_output=True, text=True, timeout=900
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=timeout
     )
     assert proc.returncode == 0, proc.stderr[-3000:]
-    out = json.loads(proc.stdout.strip().splitlines()[-1])
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+@pytest.mark.slow  # over a minute of compilation: CI's slow step
+def test_solve_batch_on_two_cpu_devices_matches_one_device():
+    out = _on_two_cpu_devices(CODE, timeout=900)
     assert out["n_devices"] == 2
     # A pool of 4 slots is split over both devices (2 rows each) in every round.
     assert out["chunk_rows"] == 4 and out["pool_devices"] == [2]
@@ -95,15 +100,7 @@ def test_paper_robot_sharded_over_two_cpu_devices_does_not_hang():
     """48 slots per device of a 12 x 12 eigen-decomposition: past jaxlib 0.10's threshold for
     its parallel LAPACK path, which hung when both devices took it at once (pacjax._linalg).
     Before the fix this run waited forever at 0 % CPU; now it takes about a minute."""
-    env = dict(os.environ)
-    env["XLA_FLAGS"] = env.get("XLA_FLAGS", "") + " --xla_force_host_platform_device_count=2"
-    env["JAX_PLATFORMS"] = "cpu"
-    env.pop("PACJAX_CACHE_DIR", None)
-    proc = subprocess.run(
-        [sys.executable, "-c", PAPER_ROBOT], env=env, capture_output=True, text=True, timeout=600
-    )
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    out = json.loads(proc.stdout.strip().splitlines()[-1])
+    out = _on_two_cpu_devices(PAPER_ROBOT, timeout=600)
     assert all(out["converged"])
     import pacjax as pj
     from pacjax.bench import random_commands
