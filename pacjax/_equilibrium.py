@@ -327,8 +327,10 @@ def check_start_contraction(scene: Scene, qs: np.ndarray) -> None:
     if any(x is None for x in known):
         return
     limits = np.asarray(known, float)
-    coords = jax.vmap(scene.coordinates)(jnp.asarray(qs))
-    elongation = np.asarray(jax.vmap(jax.vmap(scene.model.elongation))(coords))
+    # Evaluated now even inside a jit trace (a known q0 closed over by a jitted function).
+    with jax.ensure_compile_time_eval():
+        coords = jax.vmap(scene.coordinates)(jnp.asarray(qs))
+        elongation = np.asarray(jax.vmap(jax.vmap(scene.model.elongation))(coords))
     past = -elongation >= limits[None]
     if np.any(past):
         row, seg = np.argwhere(past)[0]

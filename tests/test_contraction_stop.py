@@ -70,3 +70,17 @@ def test_the_paper_robot_stops_at_its_70_mm_range():
     scene = pj.presets.stella2023()
     limits = [float(seg.contraction_limit) for seg in scene.robot.segments]
     assert limits == [pytest.approx(0.070)] * 3
+
+
+def test_known_start_closed_over_by_a_jitted_function():
+    """A concrete ``q0`` inside a ``jax.jit`` trace is still checked on the host (it used to
+    fail with a TracerArrayConversionError in the contraction check), and a start past the
+    contraction stop is still refused, at trace time."""
+    segment = pj.Segment(0.1, 0.01, 100.0)
+    scene = pj.Scene(pj.Robot([segment]), pj.PolynomialCurvature(1))
+    q0 = jnp.zeros(scene.n_dofs).at[0].set(0.1)
+    q = jax.jit(lambda: pj.solve_equilibrium(scene, None, q0).q)()
+    np.testing.assert_allclose(q, pj.solve_equilibrium(scene, None, q0).q, atol=1e-12)
+    past = q0.at[-1].set(-0.095)  # dL beyond the default limit (90 % of 0.1 m)
+    with pytest.raises(ValueError, match="contraction_limit"):
+        jax.jit(lambda: pj.solve_equilibrium(scene, None, past).q)()
