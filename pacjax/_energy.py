@@ -26,6 +26,20 @@ def section_stiffness(
     return bending, torsion
 
 
+def _section_at(segment, quadrature_points, stiffness, elongation, dtype):
+    """Gauss-Legendre nodes and weights, the length, and the bending (stiffened at
+    ``elongation``) and torsion stiffness at the nodes (``stiffness``: :func:`section_stiffness`
+    when already computed)."""
+    nodes, weights = gauss_legendre(quadrature_points)
+    length = segment.length.astype(dtype)
+    if stiffness is None:
+        stiffness = section_stiffness(segment, quadrature_points, dtype)
+    bending, torsion = stiffness
+    if segment.stiffening is not None:
+        bending = bending * segment.stiffening(elongation, length)
+    return jnp.asarray(nodes, dtype), jnp.asarray(weights, dtype), length, bending, torsion
+
+
 def _bending_torsion_energy(model, length, weights, bending, torsion, strain):
     """``1/2 int_0^1 (EI |u_bend|^2 + GJ u_twist^2) / L ds`` of strain values at the nodes."""
     energy = 0.5 / length * jnp.sum(weights * bending * (strain[:, 0] ** 2 + strain[:, 1] ** 2))
@@ -50,19 +64,11 @@ def segment_elastic_energy(
     matrix. Gauss-Legendre with ``n`` points is exact up to polynomial degree ``2 n - 1``.
     ``stiffness``: :func:`section_stiffness`, when already computed.
     """
-    nodes, weights = gauss_legendre(quadrature_points)
-    nodes = jnp.asarray(nodes, q.dtype)
-    weights = jnp.asarray(weights, q.dtype)
-    length = segment.length.astype(q.dtype)
     elongation = model.elongation(q)
+    nodes, weights, length, bending, torsion = _section_at(
+        segment, quadrature_points, stiffness, elongation, q.dtype
+    )
     strain = jax.vmap(model.strain, in_axes=(None, 0))(q, nodes)
-
-    if stiffness is None:
-        stiffness = section_stiffness(segment, quadrature_points, q.dtype)
-    bending, torsion = stiffness
-    if segment.stiffening is not None:
-        bending = bending * segment.stiffening(elongation, length)
-
     energy = _bending_torsion_energy(model, length, weights, bending, torsion, strain)
     extra = model.coordinate_energy(q, segment.torsion_stiffness.astype(q.dtype) / length)
     if extra is not None:
@@ -91,20 +97,13 @@ def segment_strain_rate_energy(
     PCC/PAC is damped by the curvature it rotates (``|u| dphi/dt``), which ``K_0`` (where
     ``phi`` has no strain) leaves undamped.
     """
-    nodes, weights = gauss_legendre(quadrature_points)
-    nodes = jnp.asarray(nodes, q.dtype)
-    weights = jnp.asarray(weights, q.dtype)
-    length = segment.length.astype(q.dtype)
-
-    def strains(x):
-        return jax.vmap(model.strain, in_axes=(None, 0))(x, nodes), model.elongation(x)
-
-    (_, elongation), (strain_rate, elongation_rate) = jax.jvp(strains, (q,), (qdot,))
-    if stiffness is None:
-        stiffness = section_stiffness(segment, quadrature_points, q.dtype)
-    bending, torsion = stiffness
-    if segment.stiffening is not None:
-        bending = bending * segment.stiffening(elongation, length)
+    elongation, elongation_rate = jax.jvp(model.elongation, (q,), (qdot,))
+    nodes, weights, length, bending, torsion = _section_at(
+        segment, quadrature_points, stiffness, elongation, q.dtype
+    )
+    _, strain_rate = jax.jvp(
+        lambda x: jax.vmap(model.strain, in_axes=(None, 0))(x, nodes), (q,), (qdot,)
+    )
     rate = _bending_torsion_energy(model, length, weights, bending, torsion, strain_rate)
     k_coord = segment.torsion_stiffness.astype(q.dtype) / length
     if model.coordinate_energy(q, k_coord) is not None:
