@@ -81,7 +81,7 @@ def _advance(scene, opts, update, controls, params, y, state, reset, q_reset, ac
         problem = _Scaled.build(sc, u)
         solver = make_solver(sc, opts, dtype)
         f_struct, aux_struct = jax.eval_shape(fn, y_, problem)
-        y_start = start_point(problem, q_)
+        y_start = start_point(problem, q_, opts)
         st_start = solver.init(fn, y_start, problem, None, f_struct, aux_struct, _TAGS)
         y_ = jnp.where(reset_, y_start, y_)
         st_ = jtu.tree_map(lambda a, b: jnp.where(reset_, a, b), st_start, st_)

@@ -86,6 +86,12 @@ class StrainModel(eqx.Module):
         u = self.strain(q, s)
         return jnp.stack([u[1], -u[0]])
 
+    def free_plane_angle(self) -> int | None:
+        """Index of a bending-plane angle that is undefined on a straight segment (the shape
+        does not depend on it there), or None. The solver turns it to the force before it
+        starts (:meth:`pacjax._equilibrium._Scaled.aligned`)."""
+        return None
+
 
 def _check_frame(frame: str) -> None:
     if frame not in _FRAMES:
@@ -115,6 +121,11 @@ class _PlanarCurvature(StrainModel):
         if self.phi_stiffness is not None:
             return self.phi_stiffness
         return 1.0 if self.frame == "paper" else 1e-6
+
+    def free_plane_angle(self) -> int | None:
+        # The curvature coordinates come first, then phi, then dL. In the paper's frame phi
+        # also twists the frame (everything distal to it), so it is not free.
+        return self.dofs_per_segment() - 2 if self.frame == "torsion_free" else None
 
     @abc.abstractmethod
     def _curvature(self, q: Float[Array, " d"], s: Float[Array, ""]) -> Float[Array, ""]: ...

@@ -1,0 +1,97 @@
+"""The solver's start: a straight PCC/PAC segment gets the bending plane of the force on it."""
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import pacjax as pj
+from pacjax._equilibrium import _Scaled
+from pacjax.bench import random_commands
+
+ANGLES = np.asarray(pj.presets.TENDON_ANGLES)
+
+
+def _aligned(scene, controls, q0=None, tol=1e-10):
+    """The start the solver takes from ``q0`` (default straight), per segment."""
+    problem = _Scaled.build(scene, jnp.asarray(controls, float))
+    q0 = scene.zeros() if q0 is None else jnp.asarray(q0, float)
+    y = problem.aligned(q0 / problem.sigma, tol)
+    return np.asarray(problem.q(y)).reshape(scene.n_segments, scene.dofs_per_segment)
+
+
+def _pull(segment, tendon, amount=0.01):
+    controls = np.zeros(9)
+    controls[3 * segment + tendon] = amount
+    return controls
+
+
+@pytest.mark.parametrize("model", [pj.PCC(), pj.PAC()], ids=["PCC", "PAC"])
+@pytest.mark.parametrize("tendon", [0, 1, 2])
+def test_straight_segment_turns_to_its_pulled_tendon(model, tendon):
+    scene = pj.presets.stella2023(model, tip_mass=0.2)
+    start = _aligned(scene, _pull(1, tendon))
+    phi = start[:, -2]
+    # The plane through the tendon, in the half (-pi/2, pi/2] that the regulariser prefers.
+    assert np.cos(2 * (phi[1] - ANGLES[tendon])) == pytest.approx(1.0, abs=1e-12)
+    assert -0.5 * np.pi < phi[1] <= 0.5 * np.pi
+    # Segments 0 and 2 feel no bending force at the straight state (Bowden tendon, hanging
+    # payload on the axis): their phi stays; the start stays straight.
+    assert phi[0] == 0.0 and phi[2] == 0.0
+    assert np.all(start[:, :-2] == 0.0) and np.all(start[:, -1] == 0.0)
+
+    # The solve from there bends the segment towards the tendon (c0 picks the side).
+    eq = pj.solve_equilibrium(scene, _pull(1, tendon))
+    assert bool(eq.converged) and bool(eq.stable)
+    q = np.asarray(eq.q).reshape(3, -1)
+    bend = q[1, 0] * np.array([np.cos(q[1, -2]), np.sin(q[1, -2])])
+    direction = np.array([np.cos(ANGLES[tendon]), np.sin(ANGLES[tendon])])
+    assert bend @ direction > 0.9 * np.linalg.norm(bend)
+
+
+def test_bent_segments_and_small_forces_keep_their_angle():
+    scene = pj.presets.stella2023(pj.PAC(), tip_mass=0.2)
+    q0 = np.zeros((3, 4))
+    q0[0] = [0.5, 0.0, 0.3, 0.0]  # bent: its phi is defined and must stay
+    start = _aligned(scene, _pull(0, 0) + _pull(2, 1), q0.reshape(-1))
+    assert start[0, 2] == 0.3
+    # Segment 2 turns to its tendon, tilted slightly by the weight now that segment 0 is bent.
+    assert np.cos(2 * (start[2, 2] - ANGLES[1])) == pytest.approx(1.0, abs=1e-3)
+    # Segment 1 sags under its weight in the plane in which segment 0 tilts it.
+    assert np.cos(2 * (start[1, 2] - 0.3)) == pytest.approx(1.0, abs=1e-12)
+    # No pull: nothing bends the straight robot (gravity acts along its axis).
+    assert np.all(_aligned(scene, np.zeros(9)) == 0.0)
+    # A force below the tolerance turns nothing.
+    assert np.all(_aligned(scene, _pull(2, 1), tol=1e3)[:, 2] == 0.0)
+
+
+@pytest.mark.parametrize(
+    "model",
+    [pj.PAC(frame="paper"), pj.PolynomialCurvature(1)],
+    ids=["PAC-paper-frame", "Poly1"],
+)
+def test_models_without_a_free_plane_angle_start_where_asked(model):
+    # In the paper's frame phi also twists the frame; Cartesian models have no angle.
+    scene = pj.presets.stella2023(model, tip_mass=0.2)
+    assert model.free_plane_angle() is None
+    assert np.all(_aligned(scene, _pull(1, 2)) == 0.0)
+
+
+@pytest.mark.parametrize("model", [pj.PCC(), pj.PAC()], ids=["PCC", "PAC"])
+def test_aligned_start_reaches_the_same_equilibria_in_fewer_steps(model):
+    scene = pj.presets.stella2023(model, tip_mass=0.2)
+    commands = random_commands(24, seed=3)
+    aligned = pj.solve_batch(scene, commands, fallback=False)
+    # A start bent by 1e-9 rad/m is not straight, so it keeps phi = 0: the solver's start
+    # before the alignment, to within that bend.
+    q0 = np.zeros((3, scene.dofs_per_segment))
+    q0[:, 0] = 1e-9
+    plain = pj.solve_batch(scene, commands, np.tile(q0.reshape(-1), (24, 1)), fallback=False)
+    for eq in (aligned, plain):
+        assert np.all(eq.converged) and np.all(eq.stable)
+    tips = [
+        np.stack([np.asarray(pj.markers(scene, q))[-1] for q in eq.q]) for eq in (aligned, plain)
+    ]
+    # Both are minima of the same energy; they may differ by the regulariser on phi
+    # (relative 1e-6), which prefers one of the two equivalent (c0, phi) of a bent segment.
+    np.testing.assert_allclose(tips[0], tips[1], atol=1e-5)
+    assert np.mean(aligned.steps) < 0.8 * np.mean(plain.steps)
