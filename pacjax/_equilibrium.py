@@ -186,8 +186,8 @@ class _Scaled(eqx.Module):
             trial = coords.at[:, k].set(jnp.where(straight, phi, coords[:, k]))
             return self.residual(trial.reshape(-1)).reshape(n, d)[:, 0]
 
-        a = force_on_c0(jnp.zeros((), y.dtype))
-        b = force_on_c0(jnp.asarray(0.5 * np.pi, y.dtype))
+        # One batched residual (one copy of its graph to compile).
+        a, b = jax.vmap(force_on_c0)(jnp.asarray([0.0, 0.5 * np.pi], y.dtype))
         phi = jnp.arctan2(-b, -a)
         phi = jnp.where(phi > 0.5 * np.pi, phi - np.pi, phi)
         phi = jnp.where(phi <= -0.5 * np.pi, phi + np.pi, phi)
