@@ -161,7 +161,7 @@ class _Scaled(eqx.Module):
         jac = self.row[:, None] * hessian * self.sigma[None, :]
         return jac, (grad * self.row, (merit, self.weights()))
 
-    def aligned(self, y, tol: float):
+    def aligned(self, y, tol: float, keep=None):
         """``y`` with the bending plane of each straight segment turned to the force on it.
 
         A PCC/PAC segment's bending-plane angle ``phi`` is undefined while it is straight (the
@@ -173,7 +173,8 @@ class _Scaled(eqx.Module):
         direction ``(cos(phi), sin(phi))``: the residuals at ``phi = 0`` and ``pi / 2`` give
         the plane of steepest descent. ``phi`` is taken in ``(-pi/2, pi/2]``, the half that the
         regulariser ``k (1 - cos(phi))`` prefers; the sign of ``c0`` then picks the side. A
-        segment that is bent, or whose force is below ``tol`` (scaled), keeps its ``phi``.
+        segment that is bent, or whose force is below ``tol`` (scaled), keeps its ``phi``, and
+        so does one where ``keep`` (a boolean per segment) says so.
         """
         k = self.scene.model.free_plane_angle()
         if k is None:
@@ -181,6 +182,8 @@ class _Scaled(eqx.Module):
         n, d = self.scene.n_segments, self.scene.dofs_per_segment
         coords = y.reshape(n, d)
         straight = jnp.all(coords[:, :k] == 0, axis=1)
+        if keep is not None:
+            straight = straight & ~keep
 
         def force_on_c0(phi):
             trial = coords.at[:, k].set(jnp.where(straight, phi, coords[:, k]))

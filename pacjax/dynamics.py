@@ -40,6 +40,7 @@ from jaxtyping import Array, Bool, Float, Int
 
 from ._energy import strain_rate_energy
 from ._equilibrium import (
+    _Scaled,
     as_traced_leaves,
     check_controls,
     check_q,
@@ -366,7 +367,9 @@ def simulate(
             ``t -> (n_tendons,)`` (differentiable in ``t``: its derivative is the commanded
             ``l_bar_dot``; pass the same function object again to reuse the compiled solver).
             Default zeros.
-        q0, qdot0: initial state (default straight and at rest).
+        q0, qdot0: initial state (default straight and at rest). For PCC/PAC, the
+            bending-plane angle of a straight segment at rest is first turned to the force on
+            it at ``t0``.
         saveat: times (s) to save at (default 101 evenly spaced over ``t_span``).
         damping: a :class:`Damping`; default :meth:`Damping.modal` (5 % on the lowest mode,
             stiffness-proportional, motors ``kappa_D = beta kappa_P``). ``Damping()``: none.
@@ -383,6 +386,15 @@ def simulate(
     Returns:
         A :class:`Trajectory`; differentiable with respect to scene parameters, damping,
         controls and initial state.
+
+    PCC and PAC through straight segments: their polar coordinates are singular there (the
+    force on ``phi`` vanishes with the curvature), so the motion of a segment that is loaded
+    while straight depends on its ``phi``. The paper's robot with PAC, hanging at rest, 40 mm
+    on the tendon at +90 degrees of section 1, tip 10 ms later (lateral, along y): -0.012 mm
+    with every ``phi = 0`` (section 1 stays on the saddle), -2.16 mm with section 1 turned to
+    its tendon (the default), -1.40 mm with all three turned. Use
+    ``PolynomialCurvature`` (order 1 is PAC's affine law in Cartesian form) to simulate
+    motion through straight segments.
     """
     if not isinstance(scene, Scene):
         raise TypeError(f"scene must be a pacjax.Scene, got {type(scene).__name__}")
@@ -445,9 +457,34 @@ def simulate(
         phi_inertia=float(phi_inertia),
         adjoint=diffrax.RecursiveCheckpointAdjoint() if adjoint is None else adjoint,
     )
+    q0 = _aligned_rest_start(scene, controls, q0, qdot0, jnp.asarray(t0, dtype))
     span = jnp.asarray([t0, t1], dtype)
     dt0 = None if dt0 is None else jnp.asarray(dt0, dtype)
     return _simulate(scene, damping, controls, q0, qdot0, span, jnp.asarray(ts, dtype), dt0, opts)
+
+
+@eqx.filter_jit
+def _aligned_rest_start(scene: Scene, controls, q0, qdot0, t0):
+    """``q0`` with the bending plane of each straight PCC/PAC segment at rest turned to the
+    force on it at ``t0`` (:meth:`pacjax._equilibrium._Scaled.aligned`).
+
+    A straight segment's ``phi`` is undefined, and the force on ``phi`` vanishes there, so the
+    polar coordinates can only start bending it in the plane ``phi`` names: a segment pulled
+    at right angles to that plane stays straight on a saddle of the dynamics until round-off
+    tips it over. The configuration is the same; only its coordinates change, and the
+    derivative with respect to ``q0`` passes through unchanged. A segment that is already
+    moving keeps its ``phi``: the plane of its velocity is then defined by it. A straight
+    segment with no force on it at ``t0`` keeps its ``phi`` too, and meets the same saddle
+    when it is first loaded (see :func:`simulate`).
+    """
+    k = scene.model.free_plane_angle()
+    if k is None:
+        return q0
+    u0 = controls(t0) if callable(controls) else controls
+    moving = jnp.any(scene.coordinates(qdot0)[:, :k] != 0, axis=1)
+    problem = jax.lax.stop_gradient(_Scaled.build(scene, jnp.asarray(u0, q0.dtype)))
+    y = problem.aligned(jax.lax.stop_gradient(q0) / problem.sigma, 1e-10, keep=moving)
+    return q0 + jax.lax.stop_gradient(problem.sigma * y - q0)
 
 
 def _check_span(t_span) -> tuple[float, float]:
