@@ -244,38 +244,45 @@ def test_energy_is_conserved_by_the_default_implicit_solver():
     assert float(jnp.max(jnp.abs(energy - energy[0]))) < 1e-6 * abs(float(energy[0]))
 
 
-@pytest.mark.slow
-@pytest.mark.expensive  # did not finish in 16 min on 2 cores beside another job
-def test_gradient_with_respect_to_damping_matches_finite_differences():
-    q0 = jnp.zeros(SCENE.n_dofs).at[0].set(0.2)
+def _damping_gradient(scene, controls, span, rtol, atol):
+    """``d q_0(span) / d beta`` at ``beta = 0.02``, from a start bent by 0.2 rad: by reverse
+    mode through the simulation (diffrax's checkpointed adjoint) and by central differences."""
+    q0 = jnp.zeros(scene.n_dofs).at[0].set(0.2)
 
-    def tip_deflection(beta):
+    def first_coordinate(beta):
         traj = pj.simulate(
-            SCENE,
-            (0.0, 0.3),
-            CONTROLS,
+            scene,
+            (0.0, span),
+            controls,
             q0=q0,
-            saveat=[0.3],
+            saveat=[span],
             damping=pj.Damping(stiffness=beta),
-            rtol=1e-10,
-            atol=1e-12,
+            rtol=rtol,
+            atol=atol,
         )
         return traj.q[-1, 0]
 
     beta = jnp.asarray(0.02)
-    grad = jax.grad(tip_deflection)(beta)
+    grad = jax.jit(jax.grad(first_coordinate))(beta)
     h = 1e-5
-    fd = (tip_deflection(beta + h) - tip_deflection(beta - h)) / (2 * h)
-    assert abs(float(grad)) > 0
-    assert abs(float(grad - fd)) < 1e-4 * abs(float(fd))
+    fd = (first_coordinate(beta + h) - first_coordinate(beta - h)) / (2 * h)
+    return float(grad), float(fd)
+
+
+@pytest.mark.slow
+@pytest.mark.expensive  # did not finish in 16 min on 2 cores beside another job
+def test_gradient_with_respect_to_damping_matches_finite_differences():
+    grad, fd = _damping_gradient(SCENE, CONTROLS, 0.3, rtol=1e-10, atol=1e-12)
+    assert abs(grad) > 0
+    assert abs(grad - fd) < 1e-4 * abs(fd)
 
 
 @pytest.mark.slow
 def test_gradient_of_a_small_trajectory_matches_finite_differences():
-    """Reverse mode through Kvaerno5 (diffrax's checkpointed adjoint) on the smallest scene
-    with everything the damping enters: one constant-curvature segment bent by 0.2 rad and
-    released under gravity and an end mass. The shared scene's version above has not
-    finished on 2 cores; this one took 275 s there (nearly all compilation)."""
+    """The same on the smallest scene with everything the damping enters: one
+    constant-curvature segment released under gravity and an end mass, 0.1 s. The shared
+    scene's version above has not finished on 2 cores; this one took 275 s there (nearly all
+    compilation)."""
     segment = pj.Segment(0.15, 0.02, 600.0, linear_density=0.3, radius=0.012)
     scene = pj.Scene(
         pj.Robot([segment], base_rotation=HANGING),
@@ -283,26 +290,9 @@ def test_gradient_of_a_small_trajectory_matches_finite_differences():
         loads=(pj.Gravity(), pj.PointMass(0.03, 0, 1.0)),
         quadrature_points=2,
     )
-    q0 = jnp.zeros(scene.n_dofs).at[0].set(0.2)
-
-    def tip_curvature(beta):
-        traj = pj.simulate(
-            scene,
-            (0.0, 0.1),
-            q0=q0,
-            saveat=[0.1],
-            damping=pj.Damping(stiffness=beta),
-            rtol=1e-9,
-            atol=1e-11,
-        )
-        return traj.q[-1, 0]
-
-    beta = jnp.asarray(0.02)
-    grad = jax.jit(jax.grad(tip_curvature))(beta)
-    h = 1e-5
-    fd = (tip_curvature(beta + h) - tip_curvature(beta - h)) / (2 * h)
-    assert abs(float(fd)) > 1.0  # the damping matters at this time
-    assert abs(float(grad - fd)) < 1e-6 * abs(float(fd))
+    grad, fd = _damping_gradient(scene, None, 0.1, rtol=1e-9, atol=1e-11)
+    assert abs(fd) > 1.0  # the damping matters at this time
+    assert abs(grad - fd) < 1e-6 * abs(fd)
 
 
 @pytest.mark.slow
