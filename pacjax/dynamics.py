@@ -391,10 +391,10 @@ def simulate(
     force on ``phi`` vanishes with the curvature), so the motion of a segment that is loaded
     while straight depends on its ``phi``. The paper's robot with PAC, hanging at rest, 40 mm
     on the tendon at +90 degrees of section 1, tip 10 ms later (lateral, along y): -0.012 mm
-    with every ``phi = 0`` (section 1 stays on the saddle), -2.16 mm with section 1 turned to
-    its tendon (the default), -1.40 mm with all three turned. Use
-    ``PolynomialCurvature`` (order 1 is PAC's affine law in Cartesian form) to simulate
-    motion through straight segments.
+    with every ``phi = 0`` (section 1 stays on the saddle), -2.16 mm with section 1 alone
+    turned to its tendon, -1.40 mm with all three in its plane (the default: the unloaded
+    sections 2 and 3 take section 1's plane). Use ``PolynomialCurvature`` (order 1 is PAC's
+    affine law in Cartesian form) to simulate motion through straight segments.
     """
     if not isinstance(scene, Scene):
         raise TypeError(f"scene must be a pacjax.Scene, got {type(scene).__name__}")
@@ -474,8 +474,8 @@ def _aligned_rest_start(scene: Scene, controls, q0, qdot0, t0):
     tips it over. The configuration is the same; only its coordinates change, and the
     derivative with respect to ``q0`` passes through unchanged. A segment that is already
     moving keeps its ``phi``: the plane of its velocity is then defined by it. A straight
-    segment with no force on it at ``t0`` keeps its ``phi`` too, and meets the same saddle
-    when it is first loaded (see :func:`simulate`).
+    segment with no force on it at ``t0`` takes the plane of the segment before it, through
+    which it will be loaded first (see :func:`simulate`).
     """
     k = scene.model.free_plane_angle()
     if k is None:

@@ -35,8 +35,9 @@ def test_straight_segment_turns_to_its_pulled_tendon(model, tendon):
     assert np.cos(2 * (phi[1] - ANGLES[tendon])) == pytest.approx(1.0, abs=1e-12)
     assert -0.5 * np.pi < phi[1] <= 0.5 * np.pi
     # Segments 0 and 2 feel no bending force at the straight state (Bowden tendon, hanging
-    # payload on the axis): their phi stays; the start stays straight.
-    assert phi[0] == 0.0 and phi[2] == 0.0
+    # payload on the axis): the first keeps its phi, the last takes segment 1's plane. The
+    # start stays straight.
+    assert phi[0] == 0.0 and phi[2] == phi[1]
     assert np.all(start[:, :-2] == 0.0) and np.all(start[:, -1] == 0.0)
 
     # The solve from there bends the segment towards the tendon (c0 picks the side).
@@ -62,6 +63,25 @@ def test_bent_segments_and_small_forces_keep_their_angle():
     assert np.all(_aligned(scene, np.zeros(9)) == 0.0)
     # A force below the tolerance turns nothing.
     assert np.all(_aligned(scene, _pull(2, 1), tol=1e3)[:, 2] == 0.0)
+
+
+def test_unloaded_straight_segments_take_the_plane_before_them():
+    """One tendon of section 1 pulled: sections 2 and 3 carry no bending force at the straight
+    start, and are loaded only through section 1's bend, in its plane. Left at phi = 0 they
+    sat on a saddle in that plane, which the solver had to find and leave."""
+    scene = pj.presets.stella2023(pj.PAC(), tip_mass=0.2)
+    controls = _pull(0, 0, 0.04)
+    start = _aligned(scene, controls)
+    assert np.all(start[:, 2] == start[0, 2])
+    aligned = pj.solve_equilibrium(scene, controls, fallback=False)
+    q0 = np.zeros((3, 4))
+    q0[:, 0] = 1e-9  # not straight: the start keeps phi = 0 (the solver's start before)
+    plain = pj.solve_equilibrium(scene, controls, q0.reshape(-1), fallback=False)
+    for eq in (aligned, plain):
+        assert bool(eq.converged) and bool(eq.stable)
+    tips = [np.asarray(pj.markers(scene, eq.q))[-1] for eq in (aligned, plain)]
+    np.testing.assert_allclose(tips[0], tips[1], atol=1e-5)
+    assert int(aligned.steps) < 0.5 * int(plain.steps)
 
 
 @pytest.mark.parametrize(
@@ -109,7 +129,7 @@ def test_simulation_start_turns_straight_segments_at_rest_only():
     start = start.reshape(3, 4)
     assert np.cos(2 * (start[0, 2] - ANGLES[0])) == pytest.approx(1.0, abs=1e-12)
     assert np.cos(2 * (start[2, 2] - ANGLES[1])) == pytest.approx(1.0, abs=1e-12)
-    assert start[1, 2] == 0.0  # no force on it
+    assert start[1, 2] == start[0, 2]  # no force on it: the plane of the segment before
     # A straight segment already bending (c0 rate) keeps the plane of its velocity.
     qdot = zero.at[8].set(0.3)
     moving = np.asarray(_aligned_rest_start(scene, u, zero, qdot, jnp.asarray(0.0)))
