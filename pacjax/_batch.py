@@ -24,19 +24,16 @@ import jax.tree_util as jtu
 import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
+from ._continuation import conservative_part, load_continuation, order_continuation, order_step
 from ._equilibrium import (
     SolverOptions,
     _Scaled,
     as_traced_leaves,
     check_controls,
     check_start_contraction,
-    conservative_part,
     equilibrium_from,
-    load_continuation,
     make_solver,
     max_total_steps,
-    order_continuation,
-    order_step,
     solve_core,
     solver_dtype,
     start_point,
@@ -374,9 +371,9 @@ def _run_chunk(scene, u, q, p, update, opts, chunk, dtype, sharding, conservativ
 def _retry_failed(scene, u, q, p, update, opts, eq, dtype, flow=True):
     """Re-solve the rows that failed, keeping whichever converged: for a non-conservative scene
     first by load continuation (from the equilibrium of its conservative part, see
-    :func:`pacjax._equilibrium.conservative_part`), for ``PolynomialCurvature`` of order >= 2
+    :func:`pacjax._continuation.conservative_part`), for ``PolynomialCurvature`` of order >= 2
     by order continuation (from the equilibrium one order lower, itself retried the same way,
-    see :func:`pacjax._equilibrium.order_step`), then, with ``flow``, with the diffrax flow."""
+    see :func:`pacjax._continuation.order_step`), then, with ``flow``, with the diffrax flow."""
 
     def rows_of(x, rows):
         return None if x is None else jtu.tree_map(lambda a: a[rows], x)

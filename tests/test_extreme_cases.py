@@ -19,8 +19,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import pacjax as pj
+from pacjax._continuation import conservative_part
 from pacjax._energy import STOP_BAND
-from pacjax._equilibrium import conservative_part
 
 # The whole file runs in CI's slow step:
 # extreme cases in two precisions: minutes of compilation on 2 cores.
@@ -370,7 +370,7 @@ def test_order_continuation_reaches_a_row_the_straight_start_misses():
     (from the ``PolynomialCurvature(2)`` equilibrium, embedded) converges, with ``fallback=False``
     (no diffrax flow), in single and batch solves, to within 1 um of Poly2's tip (the model
     error of Poly2 under this load is 0.15 um against Poly5)."""
-    from pacjax._equilibrium import order_step
+    from pacjax._continuation import order_step
     from pacjax.bench import random_commands
 
     commands = random_commands(24, seed=1)

@@ -755,7 +755,7 @@ def test_order_step_maps_are_exact(twist):
     """Order continuation starts ``PolynomialCurvature(k)`` from the embedded equilibrium of
     order ``k - 1``: the embedding (a zero top coefficient per strain component) must give the
     same configuration, and truncation must undo it."""
-    from pacjax._equilibrium import order_step
+    from pacjax._continuation import order_step
 
     segment = pj.Segment(0.1, 0.01, 500.0, linear_density=0.2)
     scene = pj.Scene(pj.Robot([segment, segment]), pj.PolynomialCurvature(3, twist=twist))
