@@ -117,6 +117,25 @@ def _perturbations(scene, rng, n_directions=8, sizes=(1e-5, 1e-3)):
     return np.concatenate(steps) * scale
 
 
+def _round_off_floor(scene, q):
+    """How far two evaluations of the max-norm scaled residual at ``q`` may differ by round-off.
+
+    A tendon's force is ``gain * (l(q) - l_0)``, a difference of two lengths of order the
+    robot's length ``L``: its round-off, ``~ eps L gain``, reaches coordinate ``j`` through
+    ``dl/dq_j``. Divided by that coordinate's scale ``d_j sigma_j``, a stiff tendon on a soft
+    segment puts it at ~1e-11: with gain 3e4 N/m on EI 1e-3 N m^2 this estimate is 3.6e-11,
+    and the solver's residual and a fresh one at the same q differed by 1.2e-11. Two
+    evaluations may each be off by it. Other round-off, amplified by a soft ``phi``
+    regulariser, reaches ~1e-12: the floor kept below.
+    """
+    length = sum(float(s.length) for s in scene.robot.segments)
+    gains = np.asarray([float(t.gain) for t in scene.tendons])
+    lever = np.abs(np.asarray(jax.jacobian(scene.tendon_lengths)(q)))  # (tendons, dofs)
+    d = np.asarray(scene.elastic_stiffness_diagonal()) * np.asarray(scene.coordinate_scale())
+    eps = float(np.finfo(np.float64).eps)
+    return max(0.05 * TOL, float(np.max(2 * eps * length * (gains @ lever) / d)))
+
+
 def _check_equilibrium(scene, controls, seed):
     eq = pj.solve_equilibrium(scene, controls, fallback=False)
     converged = bool(eq.converged)
@@ -131,12 +150,11 @@ def _check_equilibrium(scene, controls, seed):
         return eq
     assert np.all(np.isfinite(q)), q
 
-    # The reported residual is the residual of the returned q.
+    # The reported residual is the residual of the returned q, up to round-off.
     force, scaled = (np.asarray(x) for x in _residuals(scene, eq.q, controls))
     fresh = np.abs(scaled).max()
-    # Up to round-off, which the scaling can amplify to ~1e-12 (a soft phi regulariser).
     assert fresh <= 1.05 * TOL, (fresh, residual_norm)
-    np.testing.assert_allclose(fresh, residual_norm, rtol=1e-3, atol=0.05 * TOL)
+    np.testing.assert_allclose(fresh, residual_norm, rtol=1e-3, atol=_round_off_floor(scene, eq.q))
 
     # A stable equilibrium is a local minimum of the energy.
     steps = _perturbations(scene, np.random.default_rng(seed))
