@@ -38,7 +38,7 @@ from jaxtyping import Array, Float
 
 from ._loads import PointMass
 from ._quadrature import gauss_legendre
-from ._robot import concrete
+from ._robot import known_sites
 from ._scene import Scene
 from ._strain import _PlanarCurvature
 
@@ -80,7 +80,7 @@ def inertia_sites(scene: Scene, dtype) -> list:
     if not point_masses:
         return [(segs, s, masses, moments)]
     pm_segs = np.asarray([pm.segment for pm in point_masses])
-    pm_s = _sites([pm.s for pm in point_masses], dtype)
+    pm_s = known_sites([pm.s for pm in point_masses], dtype)
     pm_masses = jnp.stack([pm.mass for pm in point_masses]).astype(dtype)
     if isinstance(pm_s, np.ndarray):
         # Known sites join the body's nodes: one kinematics pass for all of them (a point mass
@@ -94,15 +94,6 @@ def inertia_sites(scene: Scene, dtype) -> list:
             )
         ]
     return [(segs, s, masses, moments), (pm_segs, pm_s, pm_masses, None)]
-
-
-def _sites(values, dtype):
-    """Point sites ``s``: a numpy array when every one is known now (the kinematics' knot path;
-    a ``jnp`` op inside ``jit`` would make them traced), else a traced array."""
-    known = concrete(values)  # None when any of them is traced
-    if known is not None and known.shape == (len(values),):
-        return known
-    return jnp.stack(values).astype(dtype)
 
 
 def coordinate_inertia(

@@ -55,6 +55,16 @@ def concrete(x) -> np.ndarray | None:
         return None
 
 
+def known_sites(values, dtype):
+    """Point sites ``s`` along segments: a numpy array when every one is known now, else a
+    traced array. Known sites take the knot path of the kinematics (``Scene.frames``); a ``jnp``
+    op inside ``jit`` would make even Python floats traced and send them down the grid path."""
+    known = concrete(values)  # None when any of them is traced
+    if known is not None and known.shape == (len(values),):
+        return known
+    return jnp.stack([jnp.asarray(v) for v in values]).astype(dtype)
+
+
 def check_scalar(name: str, value) -> None:
     """Raise a ValueError naming ``name`` unless ``value`` is a single number."""
     if jnp.shape(value) != ():
