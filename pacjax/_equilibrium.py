@@ -129,15 +129,20 @@ class _Scaled(eqx.Module):
         return self.scene.residual(self.q(y), self.controls, self.consts) * self.row
 
     def residual_and_merit(self, y):
-        """Scaled residual and the merit that a step must not raise (energy or residual)."""
+        """Scaled residual and the potential energy of the conservative part (J), the merit
+        of the continuation (with the non-conservative forces frozen, see :meth:`drive`)."""
         q = self.q(y)
-        if self.scene.is_conservative:
-            energy, grad = jax.value_and_grad(self.scene.potential_energy)(
-                q, self.controls, self.consts
-            )
-            return grad * self.row, energy
-        r = self.residual(y)
-        return r, 0.5 * jnp.sum(r * r)
+        energy, grad = jax.value_and_grad(self.scene.potential_energy)(
+            q, self.controls, self.consts
+        )
+        if not self.scene.is_conservative:
+            grad = grad - self.scene.nonconservative_forces(q)
+        return grad * self.row, energy
+
+    def drive(self, y):
+        """Non-conservative generalised forces in scaled coordinates: ``r = dE/dy - drive``
+        up to the row scale (``frozen_work`` of :class:`PseudoTransientContinuation`)."""
+        return self.sigma * self.scene.nonconservative_forces(self.q(y))
 
     def energy(self, y):
         """Potential energy (J) at ``y``: the merit of a conservative scene, without its
@@ -162,7 +167,6 @@ class _Scaled(eqx.Module):
 
             d_forces, value = jax.jacfwd(forces, has_aux=True)(q)
             grad, hessian = grad - value, hessian - d_forces
-            merit = 0.5 * jnp.sum((grad * self.row) ** 2)
         jac = self.row[:, None] * hessian * self.sigma[None, :]
         return jac, (grad * self.row, (merit, self.weights()))
 
@@ -257,6 +261,7 @@ def make_solver(scene: Scene, opts: SolverOptions, dtype) -> PseudoTransientCont
         escape_size=opts.escape_size,
         stability_tol=_stability_tol(opts, dtype),
         symmetric=scene.is_conservative,
+        frozen_work=not scene.is_conservative,
         structured=opts.hessian == "structured",
     )
 

@@ -4,12 +4,13 @@ It integrates the damped flow ``D qdot = -F(q)`` with linearised implicit Euler 
 ``(I / dt + dr/dy) dy = -r`` in scaled coordinates (``r = F / (d sigma)``, ``y = q / sigma``,
 ``d`` the diagonal of the elastic stiffness). The pseudo-time step ``dt`` grows with the fall of
 the residual (switched evolution relaxation), so the steps become Newton steps near the
-solution; a step that raises the merit (the energy for conservative scenes, ``|r|^2`` otherwise)
-is rejected and ``dt`` shrinks until the step is a short stretch of the flow, which is a descent
-direction whatever the curvature. A converged saddle (smallest eigenvalue of the scaled stiffness
-below ``-stability_tol``) is left along its negative-curvature direction, a bounded number of
-times, and the continuation then goes on until the stiffness is positive again (a residual below
-the tolerance next to the saddle is not convergence).
+solution; a step that raises the merit (the energy for conservative scenes; see ``frozen_work``
+for the others) is rejected and ``dt`` shrinks until the step is a short stretch of the flow,
+which is a descent direction whatever the curvature. A converged saddle (smallest eigenvalue of
+the scaled stiffness below ``-stability_tol``) is left along its negative-curvature direction, a
+bounded number of times, and the continuation then goes on until the stiffness is positive again
+(a residual below the tolerance next to the saddle is not convergence; for a non-conservative
+problem only on the step after the escape, since the flow may lead back to the same point).
 
 Written as an ``optimistix.AbstractRootFinder`` so that ``optimistix.root_find`` runs the loop and
 provides the implicit-function-theorem adjoint: the Hessian graph is traced once.
@@ -47,6 +48,9 @@ class PTCState(eqx.Module):
     eigvals: Float[Array, " n"]
     eigvecs: Float[Array, "n n"]
     escape_dy: Float[Array, " n"]
+    # Non-conservative generalised force at ``y`` (scaled), frozen for the merit of the next
+    # step (``frozen_work``).
+    drive: Float[Array, " n"]
     code: Int[Array, ""]
 
 
@@ -86,6 +90,12 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
     # Jacobian together (the structured Hessian of :mod:`pacjax._hessian`) instead of jacfwd,
     # and, for a symmetric (conservative) problem, ``args.energy(y)`` the merit alone.
     structured: bool = False
+    # Non-conservative problem (``symmetric=False``) split as ``r = grad E - Q``: when True,
+    # ``fn``'s merit is the energy ``E`` of the conservative part, ``args.energy(y)`` gives it
+    # alone and ``args.drive(y)`` gives ``Q``. A step from ``y`` must then not raise
+    # ``E(y') - Q(y) . (y' - y)``, the energy with the non-conservative forces frozen at ``y``
+    # (its gradient at ``y`` is ``r``). When False the merit is ``|r|^2 / 2``.
+    frozen_work: bool = False
 
     def init(self, fn, y, args, options, f_struct, aux_struct, tags):
         del fn, args, options, aux_struct, tags
@@ -104,6 +114,7 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
             eigvals=jnp.ones(n, dtype),
             eigvecs=jnp.eye(n, dtype=dtype),
             escape_dy=jnp.zeros(n, dtype),
+            drive=jnp.zeros(n, dtype),
             code=jnp.asarray(SUCCESS),
         )
 
@@ -156,14 +167,15 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
             rhs = jnp.broadcast_to(-state.residual[:, None], (2, y.shape[0], 1))
             flow, full = _linalg.solve(matrices, rhs)[..., 0]
 
-            def try_newton():
-                r_full, _ = fn(y + full, args)
-                halves = jnp.all(jnp.isfinite(full)) & jnp.all(jnp.isfinite(r_full))
-                halves = halves & (max_abs(r_full) <= 0.5 * max_abs(state.residual))
-                return jnp.where(halves, full, flow)
-
-            near = (max_abs(state.residual) <= _NEWTON_NEAR) & (state.eig < 0)
-            newton = jax.lax.cond(near, try_newton, lambda: flow)
+            near = max_abs(state.residual) <= _NEWTON_NEAR
+            if not self.frozen_work:
+                near = near & (state.eig < 0)
+            # (Under vmap a cond runs both branches: the trial is evaluated for every row.)
+            r_newton, _ = fn(y + full, args)
+            took_newton = near & jnp.all(jnp.isfinite(full)) & jnp.all(jnp.isfinite(r_newton))
+            took_newton = took_newton & (max_abs(r_newton) <= 0.5 * max_abs(state.residual))
+            took_newton = took_newton & ~first & ~escape
+            newton = jnp.where(took_newton, full, flow)
         delta = jnp.where(first, 0.0, jnp.where(escape, state.escape_dy, newton))
 
         def descends(merit):
@@ -180,8 +192,13 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
         # conservative scene is the energy without its gradient (a third of the cost). Under
         # vmap every row of a batch is at the same alpha in a given trial, so this split costs
         # no evaluation of the other kind.
+        frozen = self.frozen_work and not self.symmetric
         if self.structured and self.symmetric:
             merit_only = args.energy
+        elif frozen:
+
+            def merit_only(y_):
+                return args.energy(y_) - jnp.dot(state.drive, y_ - y)
         else:
 
             def merit_only(y_):
@@ -197,7 +214,14 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
             return alpha, descends(merit_only(y + alpha * delta)) | first | escape
 
         r_full, (m_full, _) = fn(y + delta, args)
+        if frozen:
+            m_full = m_full - jnp.dot(state.drive, delta)
         ok_full = acceptable(r_full, m_full) | first | escape
+        if not self.symmetric:
+            # A Newton step that halved the residual is taken whatever the merit says: near a
+            # solution of a soft structure the frozen work misses the stiffness of the
+            # follower loads, and the merit of the Newton step can rise.
+            ok_full = ok_full | took_newton
         alpha, ok = jax.lax.while_loop(search_cond, search_body, (jnp.asarray(1.0, dtype), ok_full))
         # No acceptable step even at the smallest length: take the shortest flow step when dt
         # is already tiny (it is a descent direction), else shrink dt and stay.
@@ -214,6 +238,7 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
             jac, (r_new, (m_new, weights)) = args.linearise(y_new)
         else:
             jac, (r_new, (m_new, weights)) = jax.jacfwd(with_aux, has_aux=True)(y_new)
+        drive = args.drive(y_new) if frozen else state.drive
         finite = jnp.all(jnp.isfinite(r_new)) & jnp.isfinite(m_new) & jnp.all(jnp.isfinite(jac))
         accept = first | (accept & finite)
         ratio = max_abs(state.residual) / jnp.maximum(max_abs(r_new), jnp.finfo(dtype).tiny)
@@ -250,11 +275,16 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
             dt=dt,
             step=state.step + 1,
             escapes=state.escapes + escape.astype(state.escapes.dtype),
-            escaping=(escape | state.escaping) & (eig < -self.stability_tol),
+            # A non-conservative problem has no energy that the escape lowered: the
+            # continuation may return to the same point, an attractor of the flow whose
+            # symmetric stiffness is indefinite. There the flag lasts one step (no termination
+            # on the escaped iterate itself); it used to hold such a row to the step limit.
+            escaping=(escape | (state.escaping & self.symmetric)) & (eig < -self.stability_tol),
             eig=eig,
             eigvals=eigvals,
             eigvecs=eigvecs,
             escape_dy=escape_dy,
+            drive=keep(drive, state.drive),
             code=code,
         )
         return keep(y_new, y), new_state, (keep(m_new, state.merit), weights)
