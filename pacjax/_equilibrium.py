@@ -37,7 +37,7 @@ from ._continuation import (
     order_continuation,
     order_step,
 )
-from ._hessian import energy_derivatives
+from ._hessian import dead_followers, energy_derivatives, follower_jacobian
 from ._ptc import PseudoTransientContinuation, final_code, max_abs
 from ._robot import concrete
 from ._scene import Scene, SceneConstants
@@ -112,6 +112,10 @@ class _Scaled(eqx.Module):
     sigma: jax.Array
     row: jax.Array
     consts: SceneConstants
+    # Follower forces as dead ones (``pacjax._hessian.dead_followers``), for the Jacobian.
+    dead_scene: Scene | None = None
+    dead_consts: SceneConstants | None = None
+    dead_index: tuple[int, ...] = eqx.field(static=True, default=())
 
     @staticmethod
     def build(scene: Scene, controls: jax.Array) -> "_Scaled":
@@ -120,7 +124,19 @@ class _Scaled(eqx.Module):
         dtype = controls.dtype
         sigma = jax.lax.stop_gradient(scene.coordinate_scale(dtype))
         d = jax.lax.stop_gradient(scene.elastic_stiffness_diagonal(dtype))
-        return _Scaled(scene, controls, sigma, 1.0 / (d * sigma), scene.constants(dtype))
+        dead = None if scene.is_conservative else dead_followers(scene)
+        dead_scene, index = (None, ()) if dead is None else dead
+        dead_consts = None if dead is None else dead_scene.constants(dtype)
+        return _Scaled(
+            scene,
+            controls,
+            sigma,
+            1.0 / (d * sigma),
+            scene.constants(dtype),
+            dead_scene,
+            dead_consts,
+            index,
+        )
 
     def q(self, y):
         return self.sigma * y
@@ -151,12 +167,21 @@ class _Scaled(eqx.Module):
 
     def linearise(self, y):
         """Scaled residual and its Jacobian, ``(dr/dy, (r, (merit, weights)))``, from the
-        structured Hessian of the potential energy. A non-conservative scene adds the forward
-        derivative of its follower forces and moments alone (a few points of the kinematics),
-        not of the whole residual. Same iterates; on 2 CPU cores a warm batch of 24 equilibria
-        of the paper's robot with ``PolynomialCurvature(6)`` (12 points) under a 3.41 N
-        follower force took 174 s against 196 s."""
+        structured Hessian of the potential energy. Follower forces of a PCC/PAC scene enter
+        it as dead forces plus the turning of their direction
+        (:func:`pacjax._hessian.follower_jacobian`; the residual is :meth:`residual_and_merit`'s).
+        Other non-conservative scenes add the forward derivative of their non-conservative
+        loads alone (a few points of the kinematics), not of the whole residual: on 2 CPU cores
+        a warm batch of 24 equilibria of the paper's robot with ``PolynomialCurvature(6)`` (12
+        points) under a 3.41 N follower force took 174 s against 196 s."""
         q = self.q(y)
+        if self.dead_scene is not None:
+            hessian = follower_jacobian(
+                self.scene, self.dead_scene, self.dead_index, q, self.controls, self.dead_consts
+            )
+            r, energy = self.residual_and_merit(y)
+            jac = self.row[:, None] * hessian * self.sigma[None, :]
+            return jac, (r, (energy, self.weights()))
         energy, grad, hessian = energy_derivatives(self.scene, q, self.controls, self.consts)
         merit = energy
         if not self.scene.is_conservative:

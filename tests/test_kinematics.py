@@ -778,3 +778,36 @@ def test_order_step_maps_are_exact(twist):
         )
     assert order_step(pj.Scene(pj.Robot([segment]), pj.PolynomialCurvature(1))) is None
     assert order_step(pj.Scene(pj.Robot([segment]), pj.PAC())) is None
+
+
+@pytest.mark.parametrize(
+    "model", [pj.PAC(), pj.PCC(frame="paper"), pj.PolynomialCurvature(2)], ids=repr
+)
+def test_follower_force_jacobian_as_dead_force_plus_turning_is_the_autodiff_one(model):
+    """Follower forces only: the Jacobian from the dead-force Hessian plus the turning of the
+    forces (``follower_jacobian``) equals ``jax.jacfwd`` of the residual, and the residual and
+    energy are the solver's own. ``PolynomialCurvature`` keeps the forward derivative of the
+    forces (its frames move with the knots), so its problem carries no dead scene."""
+    from pacjax._equilibrium import _Scaled, static_load_sites
+
+    loads = (
+        pj.PointForce((0.5, -0.3, 2.0), segment=1, s=1.0, follower=True),
+        pj.PointForce((0.0, 0.8, -0.4), segment=0, s=0.6, follower=True),
+    )
+    scene = pj.presets.stella2023(model, n_sections=2, loads=loads, quadrature_points=4)
+    scene = static_load_sites(scene)
+    u = jnp.asarray(np.random.default_rng(3).uniform(0.0, 0.01, scene.n_tendons))
+    problem = _Scaled.build(scene, u)
+    assert (problem.dead_scene is None) == isinstance(model, pj.PolynomialCurvature)
+    rng = np.random.default_rng(5)
+    for scale in (0.3, 3.0):
+        y = jnp.asarray(rng.normal(size=scene.n_dofs)) * scale
+        jac, (r, (merit, _)) = eqx.filter_jit(lambda p, x: p.linearise(x))(problem, y)
+        expected, residual, energy = eqx.filter_jit(
+            lambda p, x: (jax.jacfwd(p.residual)(x), p.residual(x), p.energy(x))
+        )(problem, y)
+        r_scale = float(jnp.max(jnp.abs(residual)))
+        np.testing.assert_allclose(r, residual, rtol=0, atol=1e-14 * r_scale)
+        assert float(merit) == pytest.approx(float(energy), rel=1e-12)
+        scale_j = float(jnp.max(jnp.abs(expected)))
+        assert float(jnp.max(jnp.abs(jac - expected))) < 1e-10 * scale_j
