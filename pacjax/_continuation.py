@@ -18,11 +18,12 @@ def conservative_part(scene: Scene) -> Scene:
     """``scene`` without its non-conservative loads (follower forces, point moments).
 
     Its equilibrium (found by the saddle-free, energy-descending continuation) is a start from
-    which continuation reaches the full one where, from the straight configuration, the
-    residual-norm merit of a non-conservative solve stalls in a local minimum (the paper's robot
-    with a 3.41 N tip follower force and random commands: from straight, 300 steps to a scaled
-    residual ~0.1; from the equilibrium without the force, 10 steps). In a batch, apply it after
-    the per-row ``update``: load indices change.
+    which continuation reaches the full one where a non-conservative solve from the straight
+    configuration fails. (With the residual-norm merit used before the frozen-work merit of
+    :class:`pacjax._ptc.PseudoTransientContinuation`, the paper's robot with a 3.41 N tip
+    follower force and random commands: from straight, 300 steps to a scaled residual ~0.1;
+    from the equilibrium without the force, 10 steps.) In a batch, apply it after the per-row
+    ``update``: load indices change.
     """
 
     def conservative(load):
