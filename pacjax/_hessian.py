@@ -118,7 +118,7 @@ def energy_derivatives(
 
 def dead_followers(scene: Scene) -> tuple[Scene, tuple[int, ...]] | None:
     """``scene`` with each follower force made a dead (world) force, and the indices of those
-    loads: the structure of :func:`follower_derivatives`, whose forces it sets per call.
+    loads: the structure of :func:`follower_jacobian`, which sets their forces per call.
 
     None when the scene has point moments (no such split), no follower force, or a model whose
     frames move with the knots of the kinematics: the dead force's work is evaluated on the
@@ -159,8 +159,8 @@ def follower_jacobian(
     The forward derivative of ``Q`` through the whole chain, which this replaces, cost about as
     much as the rest of the Hessian (the paper's robot with PAC: 346 us per row in all, against
     137 us for the same robot under a tip mass). The residual itself is not taken from here:
-    the dead force's work is evaluated on the energy's knots, ``Q`` on its own, and the two
-    differ by round-off (3.7e-12 relative at curvatures of a few rad per segment).
+    the dead force's work is evaluated on the energy's knots, ``Q`` on its own, and for PAC the
+    two differ by up to 3.7e-12 relative (curvatures of a few rad per segment).
     """
     followers = [scene.loads[i] for i in index]
     segs = np.asarray([f.segment for f in followers])

@@ -83,8 +83,8 @@ class StrainModel(eqx.Module):
 
     def frames_independent_of_knots(self) -> bool:
         """True when the frames and positions do not depend on where the kinematics places its
-        knots, up to round-off (closed-form rotations, converged position quadrature): then
-        a point's Jacobian may come from any evaluation of the kinematics. False for models
+        knots, to about 1e-12 relative (closed-form rotations, converged position quadrature):
+        then a point's Jacobian may come from any evaluation of the kinematics. False for models
         whose rotation is integrated step by step (the result moves with the knots, e.g.
         ``PolynomialCurvature(2)``: 2e-8 relative between two knot sets at curvatures ~1)."""
         return self.plane_frames(jnp.zeros(self.dofs_per_segment()), jnp.zeros(1)) is not None
