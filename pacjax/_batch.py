@@ -2,7 +2,8 @@
 
 Rows are solved in a pool of slots (``chunk_size``, at most :data:`CPU_POOL_SLOTS` per CPU
 device): one compiled, ``vmap``-ed call runs the continuation of every slot for a few steps
-(:data:`STEPS_PER_ROUND`), and a slot whose row has finished is refilled with the next row. A
+(:func:`_steps_per_round`), and a slot whose row has finished is refilled with the next row
+(its scaled starting point computed beforehand, a chunk of rows in one call). A
 ``vmap``-ed loop runs as many steps as its slowest row, so without the refill every chunk
 would cost its slowest row's step count times its size; with it, a long batch costs about the
 mean. Each row follows the iterates of
@@ -43,8 +44,19 @@ from ._scene import Scene
 from ._solution import Equilibrium
 
 #: Continuation steps per round of the slot pool (a finished row waits at most this many
-#: steps for its slot to be refilled).
-STEPS_PER_ROUND = 4
+#: steps for its slot to be refilled): 2 on CPU, 4 on accelerators (see :func:`_steps_per_round`).
+STEPS_PER_ROUND = {"cpu": 2}
+_STEPS_PER_ROUND_DEFAULT = 4
+
+
+def _steps_per_round() -> int:
+    """Steps per round on the default backend. On XLA:CPU (the paper's robot with PAC, 1,000
+    rows in a pool of 128 slots) 2 steps ran 1.95 s against 1.98-2.05 s for 3 and 2.10-2.29 s
+    for 4: a finished slot idles for fewer steps, and a round costs little once the starting
+    points are computed per block of rows (:func:`_start_block`) instead of in every round.
+    """
+    return STEPS_PER_ROUND.get(jax.default_backend(), _STEPS_PER_ROUND_DEFAULT)
+
 
 _TAGS = frozenset()
 
@@ -61,9 +73,22 @@ def _solve_chunk(scene, controls, q0, opts, params, update, conservative=False):
 
 
 @eqx.filter_jit
-def _advance(scene, opts, update, controls, params, y, state, reset, q_reset, active):
-    """One round of the slot pool: restart the ``reset`` slots from ``q_reset``, then run every
-    active slot's continuation for up to :data:`STEPS_PER_ROUND` steps (fewer when all are done).
+def _start_block(scene, opts, update, controls, params, q0):
+    """Scaled starting points (:func:`pacjax._equilibrium.start_point`) of a block of rows."""
+
+    def one(u, p, q):
+        sc = scene if update is None else update(scene, p)
+        return start_point(_Scaled.build(sc, u), q, opts)
+
+    return jax.vmap(one)(controls, params, q0)
+
+
+@eqx.filter_jit
+def _advance(scene, opts, update, controls, params, y, state, reset, y_reset, active):
+    """One round of the slot pool: restart the ``reset`` slots from ``y_reset`` (scaled
+    starting points from :func:`_start_block`, computed once per row rather than for every slot
+    in every round), then run every active slot's continuation for up to
+    :func:`_steps_per_round` steps (fewer when all are done).
 
     The steps are those of :func:`pacjax._equilibrium.solve_core` (the same root finder, resumed
     round after round), so a row's iterates do not depend on which rows share the pool.
@@ -71,14 +96,14 @@ def _advance(scene, opts, update, controls, params, y, state, reset, q_reset, ac
     """
     dtype = controls.dtype
     limit = max_total_steps(opts)
+    per_round = _steps_per_round()
     fn = _Scaled.root_fn
 
-    def one(u, p, y_, st_, reset_, q_, active_):
+    def one(u, p, y_, st_, reset_, y_start, active_):
         sc = scene if update is None else update(scene, p)
         problem = _Scaled.build(sc, u)
         solver = make_solver(sc, opts, dtype)
         f_struct, aux_struct = jax.eval_shape(fn, y_, problem)
-        y_start = start_point(problem, q_, opts)
         st_start = solver.init(fn, y_start, problem, None, f_struct, aux_struct, _TAGS)
         y_ = jnp.where(reset_, y_start, y_)
         st_ = jtu.tree_map(lambda a, b: jnp.where(reset_, a, b), st_start, st_)
@@ -92,7 +117,7 @@ def _advance(scene, opts, update, controls, params, y, state, reset, q_reset, ac
 
         def cond(carry):
             y, st, k = carry
-            return (k < STEPS_PER_ROUND) & running(y, st)
+            return (k < per_round) & running(y, st)
 
         def body(carry):
             y, st, k = carry
@@ -103,7 +128,7 @@ def _advance(scene, opts, update, controls, params, y, state, reset, q_reset, ac
         eq = equilibrium_from(sc, problem, solver, y_, st_, st_.step, opts.tol)
         return y_, st_, ~running(y_, st_), eq
 
-    return jax.vmap(one)(controls, params, y, state, reset, q_reset, active)
+    return jax.vmap(one)(controls, params, y, state, reset, y_reset, active)
 
 
 #: Solver slots per CPU device. On XLA:CPU a row-step costs about the same in a pool of 128 as in
@@ -218,7 +243,9 @@ def iter_batch(
     sharding = _sharding(n_devices)
 
     starts = _Starts(scene.n_dofs, q0, warm_start, chunk)
-    pool = _pool_solve(scene, controls_batch, starts, params, update, opts, slots, dtype, sharding)
+    pool = _pool_solve(
+        scene, controls_batch, starts, params, update, opts, slots, chunk, dtype, sharding
+    )
     buffers: dict[int, _ChunkBuffer] = {}
     next_chunk = 0
     for rows, q_start, eq_rows in pool:
@@ -294,17 +321,71 @@ class _ChunkBuffer:
         return self.missing == 0
 
 
-def _pool_solve(scene, controls, starts, params, update, opts, size, dtype, sharding):
+class _StartBlocks:
+    """Starting points of the rows, computed a block of rows at a time (one compiled call per
+    block, not one per slot and round): the unscaled ``q`` from ``starts`` and the scaled,
+    aligned ``y`` the continuation starts from. Only the blocks still being handed out are kept.
+    """
+
+    def __init__(self, scene, controls, starts, params, update, opts, block, dtype, sharding):
+        self.scene, self.controls, self.starts = scene, controls, starts
+        self.params, self.update, self.opts = params, update, opts
+        self.block, self.dtype, self.sharding = block, dtype, sharding
+        n_devices = 1 if sharding is None else len(sharding.mesh.devices.flat)
+        self.padded = -(-block // n_devices) * n_devices
+        self.blocks: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+
+    def _compute(self, b):
+        n = self.controls.shape[0]
+        rows = np.arange(b * self.block, min((b + 1) * self.block, n))
+        u = self.controls[rows]
+        q = np.asarray(self.starts(rows, u), dtype=float)
+        p = (
+            np.zeros(len(rows))
+            if self.params is None
+            else (jtu.tree_map(lambda x: x[rows], self.params))
+        )
+        inputs = (
+            jnp.asarray(_pad(u, self.padded), self.dtype),
+            jtu.tree_map(lambda x: jnp.asarray(_pad(x, self.padded)), p),
+            jnp.asarray(_pad(q, self.padded), self.dtype),
+        )
+        if self.sharding is not None:
+            inputs = jax.device_put(inputs, self.sharding)
+        y = _start_block(self.scene, self.opts, self.update, *inputs)
+        return q, np.asarray(y)[: len(rows)]
+
+    def take(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(q, y)`` starts of ``rows`` (increasing), dropping the blocks handed out in full."""
+        q_out = np.empty((len(rows), self.scene.n_dofs))
+        y_out = np.empty((len(rows), self.scene.n_dofs))
+        for b in np.unique(rows // self.block).tolist():
+            if b not in self.blocks:
+                self.blocks[b] = self._compute(b)
+            mine = rows // self.block == b
+            q, y = self.blocks[b]
+            at = rows[mine] - b * self.block
+            q_out[mine], y_out[mine] = q[at], y[at]
+        last = rows[-1] if len(rows) else -1
+        for b in [b for b in self.blocks if (b + 1) * self.block - 1 <= last]:
+            del self.blocks[b]
+        return q_out, y_out
+
+
+def _pool_solve(scene, controls, starts, params, update, opts, size, block, dtype, sharding):
     """Solve every row in a pool of ``size`` slots, refilled as rows finish (the batch does
-    not wait for its slowest row). Yields ``(rows, q_start, Equilibrium)`` of finished rows."""
+    not wait for its slowest row); starting points are computed ``block`` rows at a time.
+    Yields ``(rows, q_start, Equilibrium)`` of finished rows."""
     n = controls.shape[0]
     slot_row = np.full(size, -1)
     u_pool = np.zeros((size, controls.shape[1]))
     q_pool = np.zeros((size, scene.n_dofs))
+    y_pool = np.zeros((size, scene.n_dofs))
     if params is None:
         p_pool = np.zeros((size,))
     else:
         p_pool = jtu.tree_map(lambda x: np.zeros((size,) + x.shape[1:], x.dtype), params)
+    blocks = _StartBlocks(scene, controls, starts, params, update, opts, block, dtype, sharding)
     y, state = _initial_state(scene, opts, size, dtype, sharding)
     next_row = 0
     while True:
@@ -315,7 +396,7 @@ def _pool_solve(scene, controls, starts, params, update, opts, size, dtype, shar
         reset[free] = True
         slot_row[free] = rows
         u_pool[free] = controls[rows]
-        q_pool[free] = starts(rows, controls[rows])
+        q_pool[free], y_pool[free] = blocks.take(rows)
         if params is not None:
 
             def assign(pool, x, free=free, rows=rows):
@@ -329,14 +410,14 @@ def _pool_solve(scene, controls, starts, params, update, opts, size, dtype, shar
             jnp.asarray(u_pool, dtype),
             jtu.tree_map(jnp.asarray, p_pool),
             jnp.asarray(reset),
-            jnp.asarray(q_pool, dtype),
+            jnp.asarray(y_pool, dtype),
             jnp.asarray(active),
         )
         if sharding is not None:
             inputs = jax.device_put(inputs, sharding)
-        u_dev, p_dev, reset_dev, q_dev, active_dev = inputs
+        u_dev, p_dev, reset_dev, y_dev, active_dev = inputs
         y, state, done, eq = _advance(
-            scene, opts, update, u_dev, p_dev, y, state, reset_dev, q_dev, active_dev
+            scene, opts, update, u_dev, p_dev, y, state, reset_dev, y_dev, active_dev
         )
         done = np.asarray(done) & active
         if done.any():
