@@ -25,10 +25,12 @@ import jax.tree_util as jtu
 import numpy as np
 from jaxtyping import Array, Float
 
+from ._kinematics import segment_knot_frames
 from ._loads import PointForce, PointMoment
 from ._robot import known_sites
 from ._rotation import hat, matvec3
 from ._scene import Scene, SceneConstants
+from ._tendons import tendon_parts_derivatives
 
 
 def _contract(jac, delta):
@@ -61,9 +63,23 @@ def energy_derivatives(
         jac, out = jax.jacfwd(lambda y: (f(y), f(y)), has_aux=True)(x)
         return jac, out
 
-    seg_jac, seg_val = jax.vmap(
-        lambda qi, *args: value_and_jacobian(lambda y: segment(y, *args), qi)
-    )(coords, *inputs)
+    chords = inputs[-1]
+    if chords is None:
+        seg_jac, seg_val = jax.vmap(
+            lambda qi, *args: value_and_jacobian(lambda y: segment(y, *args), qi)
+        )(coords, *inputs)
+    else:
+        # The tendon parts from the knot frames and their Jacobian, written out
+        # (:func:`pacjax._tendons.tendon_parts_derivatives`): as automatic derivatives through
+        # the chords they were a third of this function's time.
+        def frames_and_parts(qi, length, knots, node_mass, ch):
+            f_jac, f_val = value_and_jacobian(
+                lambda y: segment_knot_frames(scene.model, y, length, knots, node_mass), qi
+            )
+            cd = tendon_parts_derivatives(f_val[0], f_val[1], f_jac[0], f_jac[1], ch)
+            return (*f_jac, cd.jacobian), (*f_val, cd.parts), cd
+
+        seg_jac, seg_val, chord_d = jax.vmap(frames_and_parts)(coords, *inputs)
     traced_sites = [k for k, _ in plan.points.traced]
     traced = [
         value_and_jacobian(lambda y, k=k, s_k=s_k: scene._traced_local(y, k, s_k), coords[k])
@@ -104,7 +120,22 @@ def energy_derivatives(
     def curvature(qi, lam_i, *args):
         return jax.hessian(lambda y: pull(lam_i, segment(y, *args)))(qi)
 
-    blocks = jax.vmap(curvature)(coords, lam_seg, *inputs)
+    def curvature_with_chords(qi, lam_i, cd, rot, pos, length, knots, node_mass, ch):
+        *lam_frames, lam_parts = lam_i
+        h_parts, (g_rot, g_pos) = cd.curvature(lam_parts, rot, pos, ch)
+        lam_frames = (lam_frames[0] + g_rot, lam_frames[1] + g_pos, lam_frames[2])
+
+        def frames(y):
+            return segment_knot_frames(scene.model, y, length, knots, node_mass)
+
+        return jax.hessian(lambda y: pull(lam_frames, frames(y)))(qi) + h_parts
+
+    if chords is None:
+        blocks = jax.vmap(curvature)(coords, lam_seg, *inputs)
+    else:
+        blocks = jax.vmap(curvature_with_chords)(
+            coords, lam_seg, chord_d, seg_val[0], seg_val[1], *inputs
+        )
     for k, s_k, lt in zip(
         traced_sites, (s for _, s in plan.points.traced), lam_traced, strict=True
     ):

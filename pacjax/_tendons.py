@@ -283,18 +283,84 @@ class LocalChords:
         }
 
 
-def segment_tendon_parts(rot, pos, chords: dict) -> Float[Array, " m"]:
-    """Each tendon's length (m) inside one segment, from the segment's local knot frames
-    (``rot`` (k, 3, 3), ``pos`` (k, 3)) and its :meth:`LocalChords.inputs` row."""
+def _chord_ends(rot, pos, chords: dict, base: bool = True):
+    """Start and end (``(c, 3)`` each) of every chord slot of one segment, in its base frame.
+
+    Linear in ``(rot, pos)`` but for the offset of chords that start at the segment's base,
+    which ``base=False`` leaves out (the map applied to derivatives of the frames)."""
 
     def ends(pick, offset):
         r = jnp.einsum("ck,kij->cij", pick, rot)
         return jnp.einsum("ck,ki->ci", pick, pos) + jnp.einsum("cij,cj->ci", r, offset)
 
     start = ends(chords["pick_a"], chords["offset_a"])
-    start = start + chords["base_a"][:, None] * chords["offset_a"]
-    chord = ends(chords["pick_b"], chords["offset_b"]) - start
-    mask = chords["mask"]
+    if base:
+        start = start + chords["base_a"][:, None] * chords["offset_a"]
+    return start, ends(chords["pick_b"], chords["offset_b"])
+
+
+def _chord_lengths(start, end, mask):
+    chord = end - start
     # Padding slots have no chord: a unit length there keeps the square root smooth.
-    sq = jnp.where(mask > 0, jnp.sum(chord * chord, axis=-1), 1.0)
-    return (mask * jnp.sqrt(sq)) @ chords["tendon"]
+    return jnp.sqrt(jnp.where(mask > 0, jnp.sum(chord * chord, axis=-1), 1.0))
+
+
+def segment_tendon_parts(rot, pos, chords: dict) -> Float[Array, " m"]:
+    """Each tendon's length (m) inside one segment, from the segment's local knot frames
+    (``rot`` (k, 3, 3), ``pos`` (k, 3)) and its :meth:`LocalChords.inputs` row."""
+    mask = chords["mask"]
+    return (mask * _chord_lengths(*_chord_ends(rot, pos, chords), mask)) @ chords["tendon"]
+
+
+class ChordDerivatives(eqx.Module):
+    """The tendon parts of one segment with their first and second derivatives along the ``d``
+    directions of the segment's knot-frame Jacobian (:func:`tendon_parts_derivatives`)."""
+
+    parts: Float[Array, " m"]
+    jacobian: Float[Array, "m d"]
+    unit: Float[Array, "c 3"]
+    length: Float[Array, " c"]
+    d_chord: Float[Array, "c 3 d"]
+    d_length: Float[Array, "c d"]
+
+    def curvature(self, lam: Float[Array, " m"], rot, pos, chords: dict):
+        """For weights ``lam`` on the parts: the Hessian of ``lam . parts`` along the frames'
+        linearisation (``d x d``), and the gradient of ``lam . parts`` with respect to the
+        frames ``(rot, pos)``, whose product with their second derivatives completes it.
+
+        With chord vectors ``c``, lengths ``l = |c|``, unit ``u`` and ``C = dc``:
+        ``d2 l = C^T (I - u u^T) C / l + u . d2c``, and ``d2c`` is linear in the frames'
+        second derivatives (the chord ends are affine in the frames).
+        """
+        lam_c = chords["mask"] * (chords["tendon"] @ lam)
+        w = lam_c / self.length
+        hessian = jnp.einsum("c,cit,cis->ts", w, self.d_chord, self.d_chord) - jnp.einsum(
+            "c,ct,cs->ts", w, self.d_length, self.d_length
+        )
+        force = lam_c[:, None] * self.unit
+        _, pull = jax.vjp(lambda r, p: _chord_ends(r, p, chords, base=False), rot, pos)
+        g_rot, g_pos = pull((-force, force))
+        return hessian, (g_rot, g_pos)
+
+
+def tendon_parts_derivatives(rot, pos, d_rot, d_pos, chords: dict) -> ChordDerivatives:
+    """:func:`segment_tendon_parts` and its derivatives along the knot frames' Jacobian
+    (``d_rot`` (k, 3, 3, d), ``d_pos`` (k, 3, d)), written out: the chord ends are affine in the
+    frames, so their derivatives are the same map applied to the frames' derivatives."""
+    mask = chords["mask"]
+    start, end = _chord_ends(rot, pos, chords)
+    length = _chord_lengths(start, end, mask)
+    unit = (end - start) / length[:, None]
+    d_start, d_end = jax.vmap(
+        lambda r, p: _chord_ends(r, p, chords, base=False), in_axes=-1, out_axes=-1
+    )(d_rot, d_pos)
+    d_chord = d_end - d_start
+    d_length = mask[:, None] * jnp.einsum("ci,cit->ct", unit, d_chord)
+    return ChordDerivatives(
+        parts=(mask * length) @ chords["tendon"],
+        jacobian=jnp.einsum("ct,cm->mt", d_length, chords["tendon"]),
+        unit=unit,
+        length=length,
+        d_chord=d_chord,
+        d_length=d_length,
+    )

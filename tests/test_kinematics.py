@@ -811,3 +811,35 @@ def test_follower_force_jacobian_as_dead_force_plus_turning_is_the_autodiff_one(
         assert float(merit) == pytest.approx(float(energy), rel=1e-12)
         scale_j = float(jnp.max(jnp.abs(expected)))
         assert float(jnp.max(jnp.abs(jac - expected))) < 1e-10 * scale_j
+
+
+@pytest.mark.parametrize(
+    "model",
+    [pj.PAC(), pj.PAC(frame="paper"), pj.PolynomialCurvature(order=1, twist=True)],
+    ids=repr,
+)
+def test_structured_hessian_with_written_out_tendon_chords_is_the_autodiff_one(model):
+    """On the paper's robot every tendon chord lies in one segment, and the solver's Hessian
+    takes the chords' derivatives written out (``pacjax._tendons.tendon_parts_derivatives``)
+    instead of differentiating through them: it must equal ``jax.hessian`` of the potential
+    energy to round-off, straight, moderately and strongly bent, with the tendons taut."""
+    from pacjax._hessian import energy_derivatives
+
+    scene = pj.presets.stella2023(model, tip_mass=0.2)
+    assert scene._energy_plan().chords is not None
+    rng = np.random.default_rng(3)
+    controls = jnp.asarray(rng.uniform(0.005, 0.02, scene.n_tendons))
+    structured = jax.jit(lambda q: energy_derivatives(scene, q, controls))
+    autodiff = jax.jit(
+        lambda q: (
+            jax.grad(scene.potential_energy)(q, controls),
+            jax.hessian(scene.potential_energy)(q, controls),
+        )
+    )
+    for scale in (0.0, 0.3, 3.0):
+        q = jnp.asarray(rng.uniform(-1.0, 1.0, scene.n_dofs) * scale)
+        _, grad, hess = structured(q)
+        grad_ad, hess_ad = autodiff(q)
+        assert np.abs(hess_ad).max() > 0
+        np.testing.assert_allclose(grad, grad_ad, rtol=0, atol=1e-13 * np.abs(grad_ad).max())
+        np.testing.assert_allclose(hess, hess_ad, rtol=0, atol=1e-13 * np.abs(hess_ad).max())
