@@ -38,6 +38,23 @@ def _contract(jac, delta):
     return jnp.tensordot(jac, delta, axes=1)
 
 
+def elastic_hessian(
+    scene: Scene, q: Float[Array, " n_dofs"], consts: SceneConstants
+) -> Float[Array, "n_dofs n_dofs"]:
+    """Hessian of the elastic energy, a sum of per-segment terms each in its own segment's
+    coordinates: block diagonal, so the ``d`` directions ``e_j`` taken in every segment at once
+    give all its blocks (``d`` forward derivatives of the gradient instead of ``n d``)."""
+    n, d = scene.n_segments, scene.dofs_per_segment
+    grad = jax.grad(scene.elastic_energy)
+
+    def column(tangent):
+        return jax.jvp(lambda x: grad(x, consts), (q,), (tangent,))[1]
+
+    tangents = jnp.tile(jnp.eye(d, dtype=q.dtype), (1, n))
+    columns = jax.vmap(column)(tangents).reshape(d, n, d)  # [j, i, k] = H_i[k, j]
+    return jax.scipy.linalg.block_diag(*[columns[:, i].T for i in range(n)])
+
+
 def energy_derivatives(
     scene: Scene, q: Float[Array, " n_dofs"], controls, consts: SceneConstants | None = None
 ) -> tuple[Float[Array, ""], Float[Array, " n_dofs"], Float[Array, "n_dofs n_dofs"]]:
@@ -48,7 +65,7 @@ def energy_derivatives(
     n_dofs = q.shape[0]
     consts = scene.constants(q.dtype) if consts is None else consts
     e_el, g_el = jax.value_and_grad(scene.elastic_energy)(q, consts)
-    h_el = jax.hessian(scene.elastic_energy)(q, consts)
+    h_el = elastic_hessian(scene, q, consts)
     plan = scene._energy_plan()
     if plan is None:
         return e_el, g_el, h_el
