@@ -340,11 +340,10 @@ class _StartBlocks:
         rows = np.arange(b * self.block, min((b + 1) * self.block, n))
         u = self.controls[rows]
         q = np.asarray(self.starts(rows, u), dtype=float)
-        p = (
-            np.zeros(len(rows))
-            if self.params is None
-            else (jtu.tree_map(lambda x: x[rows], self.params))
-        )
+        if self.params is None:
+            p = np.zeros(len(rows))
+        else:
+            p = jtu.tree_map(lambda x: x[rows], self.params)
         inputs = (
             jnp.asarray(_pad(u, self.padded), self.dtype),
             jtu.tree_map(lambda x: jnp.asarray(_pad(x, self.padded)), p),

@@ -25,7 +25,6 @@ import jax.tree_util as jtu
 import numpy as np
 from jaxtyping import Array, Float
 
-from ._kinematics import segment_knot_frames
 from ._loads import PointForce, PointMoment
 from ._robot import known_sites
 from ._rotation import hat, matvec3
@@ -89,10 +88,9 @@ def energy_derivatives(
         # The tendon parts from the knot frames and their Jacobian, written out
         # (:func:`pacjax._tendons.tendon_parts_derivatives`): as automatic derivatives through
         # the chords they were a third of this function's time.
-        def frames_and_parts(qi, length, knots, node_mass, ch):
-            f_jac, f_val = value_and_jacobian(
-                lambda y: segment_knot_frames(scene.model, y, length, knots, node_mass), qi
-            )
+        def frames_and_parts(qi, *args):
+            *frame_args, ch = args
+            f_jac, f_val = value_and_jacobian(lambda y: scene._segment_frames(y, *frame_args), qi)
             cd = tendon_parts_derivatives(f_val[0], f_val[1], f_jac[0], f_jac[1], ch)
             return (*f_jac, cd.jacobian), (*f_val, cd.parts), cd
 
@@ -137,15 +135,13 @@ def energy_derivatives(
     def curvature(qi, lam_i, *args):
         return jax.hessian(lambda y: pull(lam_i, segment(y, *args)))(qi)
 
-    def curvature_with_chords(qi, lam_i, cd, rot, pos, length, knots, node_mass, ch):
+    def curvature_with_chords(qi, lam_i, cd, rot, pos, *args):
+        *frame_args, ch = args
         *lam_frames, lam_parts = lam_i
         h_parts, (g_rot, g_pos) = cd.curvature(lam_parts, rot, pos, ch)
         lam_frames = (lam_frames[0] + g_rot, lam_frames[1] + g_pos, lam_frames[2])
-
-        def frames(y):
-            return segment_knot_frames(scene.model, y, length, knots, node_mass)
-
-        return jax.hessian(lambda y: pull(lam_frames, frames(y)))(qi) + h_parts
+        frames = jax.hessian(lambda y: pull(lam_frames, scene._segment_frames(y, *frame_args)))
+        return frames(qi) + h_parts
 
     if chords is None:
         blocks = jax.vmap(curvature)(coords, lam_seg, *inputs)

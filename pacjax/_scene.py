@@ -358,11 +358,15 @@ class Scene(eqx.Module):
         local = self._local_kinematics(self.coordinates(q), plan, consts)
         return energy + self._load_energy(local, controls, plan, consts)
 
+    def _segment_frames(self, qi, length, knots, node_weights):
+        """One segment's knot frames and weighted tangent integral in its base frame."""
+        return segment_knot_frames(self.model, qi, length, knots, node_weights)
+
     def _segment_local(self, qi, length, knots, node_weights, chords):
         """One segment's part of the local kinematics: its knot frames and weighted tangent
-        integral in its base frame, and its tendons' lengths inside it (None without
-        :class:`LocalChords`)."""
-        rot, pos, moment = segment_knot_frames(self.model, qi, length, knots, node_weights)
+        integral in its base frame (:meth:`_segment_frames`), and its tendons' lengths inside
+        it (None without :class:`LocalChords`)."""
+        rot, pos, moment = self._segment_frames(qi, length, knots, node_weights)
         parts = None if chords is None else segment_tendon_parts(rot, pos, chords)
         return rot, pos, moment, parts
 
