@@ -75,29 +75,26 @@ def energy_derivatives(
     coords = scene.coordinates(q)
     n, d = coords.shape
     dtype = q.dtype
-    inputs = scene._segment_inputs(plan, consts, dtype)
-    segment = scene._segment_local
+    *frame_inputs, chords = scene._segment_inputs(plan, consts, dtype)
 
     def value_and_jacobian(f, x):
         jac, out = jax.jacfwd(lambda y: (f(y), f(y)), has_aux=True)(x)
         return jac, out
 
-    chords = inputs[-1]
-    if chords is None:
-        seg_jac, seg_val = jax.vmap(
-            lambda qi, *args: value_and_jacobian(lambda y: segment(y, *args), qi)
-        )(coords, *inputs)
-    else:
-        # The tendon parts from the knot frames and their Jacobian, written out
-        # (:func:`pacjax._tendons.tendon_parts_derivatives`): as automatic derivatives through
-        # the chords they were a third of this function's time.
-        def frames_and_parts(qi, *args):
-            *frame_args, ch = args
-            f_jac, f_val = value_and_jacobian(lambda y: scene._segment_frames(y, *frame_args), qi)
-            cd = tendon_parts_derivatives(f_val[0], f_val[1], f_jac[0], f_jac[1], ch)
-            return (*f_jac, cd.jacobian), (*f_val, cd.parts), cd
-
-        seg_jac, seg_val, chord_d = jax.vmap(frames_and_parts)(coords, *inputs)
+    # Each segment's local kinematics (:meth:`Scene._segment_local`) and its Jacobian: the
+    # frames by forward derivatives, and the tendon parts (when every chord lies in one segment)
+    # written out from the frames' (:func:`pacjax._tendons.tendon_parts_derivatives`): as
+    # automatic derivatives through the chords they were a third of this function's time.
+    f_jac, f_val = jax.vmap(
+        lambda qi, *args: value_and_jacobian(lambda y: scene._segment_frames(y, *args), qi)
+    )(coords, *frame_inputs)
+    chord_d = None
+    if chords is not None:
+        chord_d = jax.vmap(lambda v, j, ch: tendon_parts_derivatives(v[0], v[1], j[0], j[1], ch))(
+            f_val, f_jac, chords
+        )
+    seg_jac = (*f_jac, None if chord_d is None else chord_d.jacobian)
+    seg_val = (*f_val, None if chord_d is None else chord_d.parts)
     traced_sites = [k for k, _ in plan.points.traced]
     traced = [
         value_and_jacobian(lambda y, k=k, s_k=s_k: scene._traced_local(y, k, s_k), coords[k])
@@ -134,24 +131,20 @@ def energy_derivatives(
 
     h_load = jax.hessian(psi_linear)(jnp.zeros(n * d, dtype))
 
-    # lambda . d2L: per segment, along its own coordinates.
-    def curvature(qi, lam_i, *args):
-        return jax.hessian(lambda y: pull(lam_i, segment(y, *args)))(qi)
-
-    def curvature_with_chords(qi, lam_i, cd, rot, pos, *args):
-        *frame_args, ch = args
+    # lambda . d2L: per segment, along its own coordinates. The tendon parts add their
+    # Hessian along the frames' linearisation and their pull on the frames.
+    def curvature(qi, lam_i, cd, rot, pos, ch, *frame_args):
         *lam_frames, lam_parts = lam_i
-        h_parts, (g_rot, g_pos) = cd.curvature(lam_parts, rot, pos, ch)
-        lam_frames = (lam_frames[0] + g_rot, lam_frames[1] + g_pos, lam_frames[2])
+        h_parts = 0.0
+        if cd is not None:
+            h_parts, (g_rot, g_pos) = cd.curvature(lam_parts, rot, pos, ch)
+            lam_frames = (lam_frames[0] + g_rot, lam_frames[1] + g_pos, lam_frames[2])
         frames = jax.hessian(lambda y: pull(lam_frames, scene._segment_frames(y, *frame_args)))
         return frames(qi) + h_parts
 
-    if chords is None:
-        blocks = jax.vmap(curvature)(coords, lam_seg, *inputs)
-    else:
-        blocks = jax.vmap(curvature_with_chords)(
-            coords, lam_seg, chord_d, seg_val[0], seg_val[1], *inputs
-        )
+    blocks = jax.vmap(curvature)(
+        coords, lam_seg, chord_d, seg_val[0], seg_val[1], chords, *frame_inputs
+    )
     for k, s_k, lt in zip(
         traced_sites, (s for _, s in plan.points.traced), lam_traced, strict=True
     ):
