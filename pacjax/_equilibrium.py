@@ -30,6 +30,7 @@ import lineax as lx
 import numpy as np
 import optimistix as optx
 
+from ._chord import kvaerno5
 from ._continuation import (
     conservative_part,
     keep_better,
@@ -57,7 +58,8 @@ class SolverOptions(eqx.Module):
         escape_size: size of that perturbation (rad of curvature).
         stability_tol: threshold on the smallest scaled eigenvalue for ``stable``.
         method: ``"ptc"`` (continuation, default) or ``"flow"`` (diffrax).
-        flow_solver: diffrax solver of the flow method.
+        flow_solver: diffrax solver of the flow method (default ``diffrax.Kvaerno5`` with
+            :class:`pacjax._chord.DenseChord`).
         hessian: ``"structured"`` (default: per-segment forward derivatives of the kinematics,
             :mod:`pacjax._hessian`, plus the forward derivative of the follower loads alone
             in a non-conservative scene) or ``"autodiff"`` (``jax.jacfwd`` of the residual).
@@ -72,7 +74,7 @@ class SolverOptions(eqx.Module):
     escape_size: float = eqx.field(static=True, default=0.05)
     stability_tol: float | None = eqx.field(static=True, default=None)
     method: str = eqx.field(static=True, default="ptc")
-    flow_solver: diffrax.AbstractSolver = eqx.field(static=True, default=diffrax.Kvaerno5())
+    flow_solver: diffrax.AbstractSolver = eqx.field(static=True, default=kvaerno5())
     hessian: str = eqx.field(static=True, default="structured")
 
     def __check_init__(self):
@@ -251,16 +253,23 @@ class _Scaled(eqx.Module):
         return r, (merit, args.weights())
 
 
+@eqx.filter_jit
+def _flow(t, y, problem: _Scaled):
+    """``-r(y)``, jitted on its own so that the solver's calls and derivatives share one trace
+    (the problem comes in diffrax's ``args``)."""
+    return -problem.residual(y)
+
+
 def _flow_start(problem: _Scaled, y0, opts: SolverOptions):
     """Integrate the preconditioned flow ``dy/dt = -r(y)`` with diffrax towards a steady state."""
-    term = diffrax.ODETerm(lambda t, y, args: -problem.residual(y))
     sol = diffrax.diffeqsolve(
-        term,
+        diffrax.ODETerm(_flow),
         opts.flow_solver,
         t0=0.0,
         t1=jnp.inf,
         dt0=None,
         y0=y0,
+        args=problem,
         stepsize_controller=diffrax.PIDController(rtol=1e-6, atol=1e-9),
         event=diffrax.Event(diffrax.steady_state_event(rtol=0.0, atol=opts.tol * 100)),
         max_steps=opts.max_steps * 100,
