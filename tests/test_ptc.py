@@ -1,6 +1,7 @@
 """The pseudo-transient continuation root finder on its own, and the follower-force residual."""
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
@@ -24,6 +25,39 @@ def test_no_descent_at_the_smallest_step_is_reported_stalled_early():
     assert int(sol.state.code) == STALLED
     assert int(sol.stats["num_steps"]) < 40, int(sol.stats["num_steps"])
     assert np.all(np.abs(np.asarray(sol.value) ** 2 + 1.0) > 0.5)
+
+
+def test_a_full_step_within_the_energys_rounding_is_taken():
+    # An energy whose terms are ~2e3 but whose value at the solution is zero: near the solution
+    # its rounding (that of the terms) hides the decrease of a Newton step, and a rise by
+    # rounding there says nothing. The step is taken when its predicted decrease is within the
+    # rounding of the energy and the elastic-like term |w y|^2; judged on the energy alone, the
+    # continuation rejected those steps and ran to its 300-step limit at residual 2.7e-11.
+    rng = np.random.default_rng(0)
+    m = rng.normal(size=(6, 6))
+    a = jnp.asarray(m @ m.T + 6.0 * np.eye(6))
+    rng.normal(size=6)  # (the draws of the scan this case came from)
+    rng.normal(size=6)
+    b = jnp.asarray(rng.normal(size=6)) * 1e3
+
+    def energy(y):
+        return 0.5 * y @ (a @ y) - b @ y + 0.25 * jnp.sum(y**4)
+
+    grad = jax.grad(energy)
+    ref = optx.root_find(
+        lambda y, _: grad(y), optx.Newton(rtol=1e-10, atol=1e-5), jnp.zeros(6, jnp.float64)
+    ).value
+    offset = -energy(ref)
+
+    def fn(y, args):
+        return grad(y), (energy(y) + offset, jnp.ones_like(y))
+
+    solver = PseudoTransientContinuation(rtol=0.0, atol=1e-12, symmetric=True)
+    y0 = jnp.zeros(6, jnp.float64)
+    sol = optx.root_find(fn, solver, y0, has_aux=True, max_steps=300, throw=False)
+    assert sol.result == optx.RESULTS.successful
+    assert int(sol.stats["num_steps"]) <= 15, int(sol.stats["num_steps"])
+    assert np.abs(np.asarray(grad(sol.value))).max() <= 1e-12
 
 
 def test_follower_force_residual_is_the_same_under_jit():
