@@ -36,7 +36,9 @@ def test_a_full_step_within_the_energys_rounding_is_taken():
     rng = np.random.default_rng(0)
     m = rng.normal(size=(6, 6))
     a = jnp.asarray(m @ m.T + 6.0 * np.eye(6))
-    rng.normal(size=6)  # (the draws of the scan this case came from)
+    # The third draw of b: with b drawn right after m (seeds 0-3) the energy test alone also
+    # converged, so those cases do not tell the rule's work.
+    rng.normal(size=6)
     rng.normal(size=6)
     b = jnp.asarray(rng.normal(size=6)) * 1e3
 
