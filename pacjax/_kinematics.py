@@ -192,17 +192,23 @@ def chain_segments(
     base_rotation: Float[Array, "3 3"],
     base_position: Float[Array, "3"],
 ) -> tuple[Float[Array, "n 3 3"], Float[Array, "n 3"]]:
-    """World frames of the segments' bases from their local end frames (a scan over segments)."""
+    """World frames of the segments' bases from their local end frames.
 
-    def chain(carry, end):
-        r, p = carry
-        d_rot, d_pos = end
-        return (matmul3(r, d_rot), p + matvec3(r, d_pos)), (r, p)
+    Composing rigid transforms is associative, so the chain is a parallel prefix
+    (``jax.lax.associative_scan``: ``log2(n)`` batched products), not a sequential scan: its
+    second derivatives, which the solver's Hessian takes, then hold no loop (XLA:CPU runs a
+    loop's iterations as separate small kernels).
+    """
+
+    def compose(first, second):
+        r1, p1 = first
+        r2, p2 = second
+        return matmul3(r1, r2), p1 + matvec3(r1, p2)
 
     dtype = end_rot.dtype
-    start = (base_rotation.astype(dtype), base_position.astype(dtype))
-    _, (rot, pos) = jax.lax.scan(chain, start, (end_rot, end_pos))
-    return rot, pos
+    rots = jnp.concatenate([base_rotation.astype(dtype)[None], end_rot[:-1]])
+    pos = jnp.concatenate([base_position.astype(dtype)[None], end_pos[:-1]])
+    return jax.lax.associative_scan(compose, (rots, pos))
 
 
 class Knots:
@@ -291,15 +297,139 @@ def segment_knot_frames(
 def _knot_positions(model, q, length, h, weights, rots, tangents, node_weights):
     """Knot positions (and the weighted tangent integral) from the tangents at the position
     nodes of every interval (``(intervals, nodes, 3)``)."""
-    dtype = q.dtype
+    pos, moment = _tangent_sums(h, weights, tangents, node_weights)
+    ell = length + model.elongation(q)
+    return rots, ell * pos, None if moment is None else ell * moment
+
+
+def _tangent_sums(h, weights, tangents, node_weights):
+    """Knot positions and weighted tangent integral per unit length of the segment: linear in
+    the tangents at the position nodes (``(intervals, nodes, 3)``)."""
+    dtype = tangents.dtype
     w = jnp.asarray(weights, dtype)
-    scale = (length + model.elongation(q)) * h
-    steps_pos = scale[:, None] * jnp.einsum("n,kni->ki", w, tangents)
+    steps_pos = h[:, None] * jnp.einsum("n,kni->ki", w, tangents)
     pos = jnp.concatenate([jnp.zeros((1, 3), dtype), jnp.cumsum(steps_pos, axis=0)])
     if node_weights is None:
-        return rots, pos, None
-    moment = jnp.einsum("k,kn,kni->i", scale, node_weights * w, tangents)
-    return rots, pos, moment
+        return pos, None
+    return pos, jnp.einsum("k,kn,kni->i", h, node_weights * w, tangents)
+
+
+def has_plane_derivatives(model: StrainModel) -> bool:
+    """Whether :func:`segment_knot_jacobian` and :func:`segment_knot_curvature` apply."""
+    return model.plane_angle_basis(np.zeros(1)) is not None
+
+
+def _plane_points(model, q, knots):
+    """The bending angles and their bases at the knots and at the position nodes."""
+    dtype = q.dtype
+    a = knots[:-1]
+    h = knots[1:] - a
+    nodes, weights = gauss_legendre(_INTERVAL_NODES)
+    s_nodes = a[:, None] + h[:, None] * jnp.asarray(nodes, dtype)[None, :]
+    return (
+        (model._angle(q, knots), model.plane_angle_basis(knots)),
+        (model._angle(q, s_nodes), model.plane_angle_basis(s_nodes)),
+        h,
+        weights,
+    )
+
+
+def _angle_jacobian(basis):
+    """``d (theta, phi) / d q`` at each point (``(*p, 2, d)``) from ``d theta / d q[:m]``."""
+    m = basis.shape[-1]
+    shape = basis.shape[:-1]
+    zeros = jnp.zeros(shape + (1,), basis.dtype)
+    row_theta = jnp.concatenate([basis, zeros, zeros], axis=-1)
+    row_phi = jnp.concatenate([jnp.zeros(shape + (m,), basis.dtype), zeros + 1.0, zeros], axis=-1)
+    return jnp.stack([row_theta, row_phi], axis=-2)
+
+
+def segment_knot_jacobian(
+    model: StrainModel,
+    q: Float[Array, " d"],
+    length: Float[Array, ""],
+    knots: Float[Array, " k"],
+    node_weights: Float[Array, "i n"] | None = None,
+):
+    """:func:`segment_knot_frames` and its Jacobian along ``q`` (``(jacobian, value)``, the
+    layout of ``jax.jacfwd(..., has_aux=True)``) for a model whose frames depend on ``q``
+    only through the bending angle ``theta(s)``, linear in the curvature coordinates, and the
+    plane angle ``phi`` (:meth:`StrainModel.plane_angle_basis`). The rotations and tangents are
+    differentiated point by point along ``(theta, phi)`` alone; the positions are linear in the
+    tangents and proportional to the segment's length ``L + dL``."""
+    phi = q[-2]
+    (theta_k, basis_k), (theta_n, basis_n), h, weights = _plane_points(model, q, knots)
+
+    def point(theta):
+        def rt(x):
+            return model.plane_rotation_tangent(x[0], x[1])
+
+        jac, val = jax.jacfwd(lambda x: (rt(x), rt(x)), has_aux=True)(jnp.stack([theta, phi]))
+        return jac, val
+
+    (d_rot, _), (rots, _) = jax.vmap(point)(theta_k)
+    (_, d_tan), (_, tangents) = jax.vmap(jax.vmap(point))(theta_n)
+    # Chain rule through (theta, phi)(q).
+    d_rot = jnp.einsum("kija,kad->kijd", d_rot, _angle_jacobian(basis_k))
+    d_tan = jnp.einsum("inxa,inad->inxd", d_tan, _angle_jacobian(basis_n))
+    ell = length + model.elongation(q)
+    pos, moment = _tangent_sums(h, weights, tangents, node_weights)
+    d_pos, d_moment = jax.vmap(
+        lambda t: _tangent_sums(h, weights, t, node_weights), in_axes=-1, out_axes=-1
+    )(d_tan)
+    # d (ell x) / d dL = x.
+    d_pos = (ell * d_pos).at[..., -1].add(pos)
+    value = (rots, ell * pos, None if moment is None else ell * moment)
+    if moment is None:
+        return (d_rot, d_pos, None), value
+    d_moment = (ell * d_moment).at[..., -1].add(moment)
+    return (d_rot, d_pos, d_moment), value
+
+
+def segment_knot_curvature(
+    model: StrainModel,
+    q: Float[Array, " d"],
+    length: Float[Array, ""],
+    knots: Float[Array, " k"],
+    node_weights: Float[Array, "i n"] | None,
+    lam: tuple,
+) -> Float[Array, "d d"]:
+    """Hessian along ``q`` of ``lam . segment_knot_frames(q)`` (``lam`` a cotangent of its
+    value: rotations, positions, weighted tangent integral) for the models of
+    :func:`segment_knot_jacobian`. The position terms are a weighted sum of tangents,
+    ``(L + dL) sum_p beta_p . T(theta_p, phi)``, so the whole Hessian comes from 2 x 2
+    Hessians at the points, mapped through ``(theta, phi)(q)`` (linear)."""
+    lam_rot, lam_pos, lam_moment = lam
+    phi = q[-2]
+    (theta_k, basis_k), (theta_n, basis_n), h, weights = _plane_points(model, q, knots)
+    w = jnp.asarray(weights, q.dtype)
+    # Interval j's tangents reach every knot after it: beta = h w (sum_{k > j} lam_pos_k + W nu).
+    beyond = jnp.cumsum(lam_pos[::-1], axis=0)[::-1][1:]
+    beta = beyond[:, None, :]
+    if lam_moment is not None:
+        beta = beta + node_weights[:, :, None] * lam_moment
+    beta = (h[:, None] * w[None, :])[:, :, None] * beta
+
+    def rot_term(theta, lam_k):
+        f = lambda x: jnp.sum(lam_k * model.plane_rotation_tangent(x[0], x[1])[0])  # noqa: E731
+        return jax.hessian(f)(jnp.stack([theta, phi]))
+
+    def tan_term(theta, beta_p):
+        f = lambda x: jnp.dot(beta_p, model.plane_rotation_tangent(x[0], x[1])[1])  # noqa: E731
+        x = jnp.stack([theta, phi])
+        return jax.hessian(f)(x), jax.grad(f)(x)
+
+    h_rot = jax.vmap(rot_term)(theta_k, lam_rot)
+    h_tan, g_tan = jax.vmap(jax.vmap(tan_term))(theta_n, beta)
+    a_k = _angle_jacobian(basis_k)
+    a_n = _angle_jacobian(basis_n)
+    ell = length + model.elongation(q)
+    hessian = jnp.einsum("kai,kab,kbj->ij", a_k, h_rot, a_k)
+    hessian = hessian + ell * jnp.einsum("nmai,nmab,nmbj->ij", a_n, h_tan, a_n)
+    # d2 / d dL dq of ell x: the first derivative of the tangent sum.
+    cross = jnp.einsum("nma,nmai->i", g_tan, a_n)
+    hessian = hessian.at[-1, :].add(cross).at[:, -1].add(cross)
+    return hessian
 
 
 def knot_frames(

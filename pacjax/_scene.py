@@ -20,9 +20,12 @@ from ._kinematics import (
     PointLayout,
     chain_segments,
     grid_frames,
+    has_plane_derivatives,
     knot_frames,
     local_frame,
+    segment_knot_curvature,
     segment_knot_frames,
+    segment_knot_jacobian,
     take_runs,
 )
 from ._loads import Gravity, PointForce, PointMass, PointMoment
@@ -361,6 +364,35 @@ class Scene(eqx.Module):
     def _segment_frames(self, qi, length, knots, node_weights):
         """One segment's knot frames and weighted tangent integral in its base frame."""
         return segment_knot_frames(self.model, qi, length, knots, node_weights)
+
+    def _segment_frames_jacobian(self, qi, length, knots, node_weights):
+        """``(d frames / d qi, frames)`` of :meth:`_segment_frames`: point by point along the
+        bending and plane angles for PCC/PAC (:func:`pacjax._kinematics.segment_knot_jacobian`),
+        by forward derivatives otherwise."""
+        if has_plane_derivatives(self.model):
+            return segment_knot_jacobian(self.model, qi, length, knots, node_weights)
+
+        def frames(y):
+            value = self._segment_frames(y, length, knots, node_weights)
+            return value, value
+
+        return jax.jacfwd(frames, has_aux=True)(qi)
+
+    def _segment_frames_curvature(self, qi, lam, length, knots, node_weights):
+        """Hessian along ``qi`` of ``lam . frames(qi)`` (``lam`` a cotangent of
+        :meth:`_segment_frames`' value)."""
+        if has_plane_derivatives(self.model):
+            return segment_knot_curvature(self.model, qi, length, knots, node_weights, lam)
+
+        def pull(y):
+            leaves = zip(
+                jax.tree_util.tree_leaves(lam),
+                jax.tree_util.tree_leaves(self._segment_frames(y, length, knots, node_weights)),
+                strict=True,
+            )
+            return sum(jnp.sum(lt * x) for lt, x in leaves)
+
+        return jax.hessian(pull)(qi)
 
     def _segment_local(self, qi, length, knots, node_weights, chords):
         """One segment's part of the local kinematics: its knot frames and weighted tangent

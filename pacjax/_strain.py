@@ -81,6 +81,13 @@ class StrainModel(eqx.Module):
         the kinematics integrates with the Magnus method."""
         return None
 
+    def plane_angle_basis(self, s: Float[Array, "*p"]) -> Float[Array, "*p m"] | None:
+        """For models with :meth:`plane_frames`: ``d theta / d q[:m]`` at ``s``, the bending
+        angle being linear in the ``m = d - 2`` curvature coordinates (then ``phi = q[-2]``,
+        ``dL = q[-1]``, and the frames depend on ``q`` only through ``theta(s)`` and ``phi``:
+        :func:`pacjax._kinematics.segment_knot_jacobian`). None for the other models."""
+        return None
+
     def frames_independent_of_knots(self) -> bool:
         """True when the frames and positions do not depend on where the kinematics places its
         knots, to about 1e-12 relative (closed-form rotations, converged position quadrature):
@@ -142,12 +149,21 @@ class _PlanarCurvature(StrainModel):
     def _angle(self, q: Float[Array, " d"], s: Float[Array, "*p"]) -> Float[Array, "*p"]:
         """Bending angle ``theta(s) = int_0^s c(t) dt`` (rad)."""
 
+    @abc.abstractmethod
+    def plane_angle_basis(self, s): ...
+
     def plane_frames(self, q, s):
+        return self.plane_rotation_tangent(self._angle(q, s), q[-2])
+
+    def plane_rotation_tangent(
+        self, theta: Float[Array, "*p"], phi: Float[Array, ""]
+    ) -> tuple[Float[Array, "*p 3 3"], Float[Array, "*p 3"]]:
+        """Rotation (base rotation included) and tangent ``R e_z`` at bending angle ``theta``
+        in the plane at angle ``phi``."""
         # The strain keeps the axis (-sin phi, cos phi, 0), so the frame is a rotation by
         # theta(s) about it: R = Rz(phi) Ry(theta) Rz(-phi), or the paper's Rz(phi) Ry(theta).
-        theta = self._angle(q, s)
         ct, st = jnp.cos(theta), jnp.sin(theta)
-        cp, sp = jnp.cos(q[-2]), jnp.sin(q[-2])
+        cp, sp = jnp.cos(phi), jnp.sin(phi)
         zero = jnp.zeros_like(theta)
         tangent = jnp.stack([cp * st, sp * st, ct], axis=-1)
         if self.frame == "paper":
@@ -217,6 +233,9 @@ class PCC(_PlanarCurvature):
     def _angle(self, q, s):
         return q[0] * s
 
+    def plane_angle_basis(self, s):
+        return jnp.asarray(s)[..., None]
+
 
 class PAC(_PlanarCurvature):
     """Piecewise affine curvature (the paper): ``q_i = [c0, c1, phi, dL]``, ``c(s) = c0 + c1 s``.
@@ -241,6 +260,10 @@ class PAC(_PlanarCurvature):
 
     def _angle(self, q, s):
         return s * (q[0] + 0.5 * q[1] * s)
+
+    def plane_angle_basis(self, s):
+        s = jnp.asarray(s)
+        return jnp.stack([s, 0.5 * s * s], axis=-1)
 
 
 class PolynomialCurvature(StrainModel):

@@ -814,8 +814,65 @@ def test_follower_force_jacobian_as_dead_force_plus_turning_is_the_autodiff_one(
 
 
 @pytest.mark.parametrize(
+    "model", [pj.PAC(), pj.PAC(frame="paper"), pj.PCC(), pj.PCC(frame="paper")], ids=repr
+)
+def test_plane_frame_derivatives_are_the_autodiff_ones(model):
+    """PCC/PAC knot frames differentiated point by point along the bending and plane angles
+    (:func:`pacjax._kinematics.segment_knot_jacobian`, :func:`segment_knot_curvature`) equal
+    ``jax.jacfwd`` and ``jax.hessian`` of the frames: straight, at 1e-9 rad (where ``phi`` is
+    nearly undefined), and bent by several rad; with and without the weighted tangent
+    integral; with an empty padding interval at the end."""
+    import jax.tree_util as jtu
+
+    from pacjax._kinematics import (
+        _INTERVAL_NODES,
+        segment_knot_curvature,
+        segment_knot_frames,
+        segment_knot_jacobian,
+    )
+
+    rng = np.random.default_rng(0)
+    inner = np.sort(rng.uniform(0.0, 1.0, 9))
+    knots = jnp.asarray(np.concatenate([[0.0], inner, [1.0, 1.0]]))
+    d = model.dofs_per_segment()
+    weights = jnp.asarray(rng.uniform(0.0, 1.0, (len(knots) - 1, _INTERVAL_NODES)))
+    length = jnp.asarray(0.12)
+    for bend in (0.0, 1e-9, 1.0, 4.0):
+        q = jnp.asarray(
+            np.concatenate([rng.normal(0.0, bend, d - 2), [rng.uniform(-3, 3)], [0.004]])
+        )
+        for node_weights in (weights, None):
+
+            def frames(y, node_weights=node_weights):
+                return segment_knot_frames(model, y, length, knots, node_weights)
+
+            value = frames(q)
+            jac, val = segment_knot_jacobian(model, q, length, knots, node_weights)
+            for got, want in zip(jtu.tree_leaves(val), jtu.tree_leaves(value), strict=True):
+                np.testing.assert_array_equal(got, want)
+            jac_ad = jax.jacfwd(frames)(q)
+            for got, want in zip(jtu.tree_leaves(jac), jtu.tree_leaves(jac_ad), strict=True):
+                np.testing.assert_allclose(got, want, rtol=0, atol=1e-14 * np.abs(want).max())
+            lam = jtu.tree_map(lambda x: jnp.asarray(rng.normal(size=x.shape)), value)
+
+            def pull(y, lam=lam, frames=frames):
+                pairs = zip(jtu.tree_leaves(lam), jtu.tree_leaves(frames(y)), strict=True)
+                return sum(jnp.sum(a * b) for a, b in pairs)
+
+            hess_ad = jax.hessian(pull)(q)
+            hess = segment_knot_curvature(model, q, length, knots, node_weights, lam)
+            assert np.abs(hess_ad).max() > 0
+            np.testing.assert_allclose(hess, hess_ad, rtol=0, atol=1e-14 * np.abs(hess_ad).max())
+
+
+@pytest.mark.parametrize(
     "model",
-    [pj.PAC(), pj.PAC(frame="paper"), pj.PolynomialCurvature(order=1, twist=True)],
+    [
+        pj.PAC(),
+        pj.PAC(frame="paper"),
+        pj.PCC(),
+        pj.PolynomialCurvature(order=1, twist=True),
+    ],
     ids=repr,
 )
 def test_structured_hessian_with_written_out_tendon_chords_is_the_autodiff_one(model):
