@@ -5,6 +5,8 @@ Built once per scene structure (:meth:`pacjax.Scene._energy_plan`); everything h
 (numpy arrays and Python indices), so the energy kernels index by slices, not gathers.
 """
 
+import copy
+
 import jax
 import numpy as np
 
@@ -99,7 +101,23 @@ class EnergyPlan:
         self.world_points = sorted(set(world))
         flat = self.knots.flat_index[np.asarray(self.world_points, np.int64)]
         self.world_runs = index_runs(flat)
+        # The knot rows (within a segment) that the load energy reads: the segment ends (for
+        # the chaining) and the world points.
+        width = self.knots.width
+        self.load_rows = np.unique(np.concatenate([flat % width, [width - 1]]).astype(np.int64))
         self.world_segments = [int(self.points.segs[k]) for k in self.world_points]
+
+    def on_load_rows(self) -> "EnergyPlan":
+        """This plan for local frames that hold only the knot rows :attr:`load_rows` of each
+        segment (``(n_segments, len(load_rows), ...)``): the load energy reads no other row,
+        so its derivatives need the kinematics' linearisation there only."""
+        other = copy.copy(self)
+        width, rows = self.knots.width, self.load_rows
+        flat = self.knots.flat_index[np.asarray(self.world_points, np.int64)]
+        other.world_runs = index_runs(
+            (flat // width) * len(rows) + np.searchsorted(rows, flat % width)
+        )
+        return other
 
     def node_mass(self, dtype):
         """Mass beyond each position node (weights of the by-parts weight), or None."""

@@ -71,6 +71,42 @@ def test_pool_refills_slots_and_yields_chunks_in_order(scene):
             assert int(eq.steps[i - rows.start]) == int(single.steps)
 
 
+def test_pools_side_by_side_agree_with_one_pool_and_stop_cleanly(scene, monkeypatch):
+    # On one CPU device two slot pools share the rows, each in its own thread: the results are
+    # those of one pool (the same steps; the pools' sizes differ, hence round-off); a caller
+    # that stops early, or a failure inside a pool, leaves no thread behind; a failure reaches
+    # the caller.
+    import threading
+
+    from pacjax import _batch
+
+    commands = np.random.default_rng(5).uniform(0.0, 0.012, (12, 3))
+    assert _batch._lanes(3, None, warm_start=False) == 2
+    assert _batch._lanes(3, None, warm_start=True) == 1
+    assert _batch._lanes(1, None, warm_start=False) == 1
+    threads = threading.active_count()
+    two = pj.solve_batch(scene, commands, chunk_size=3)
+    monkeypatch.setattr(_batch, "CPU_LANES", 1)
+    one = pj.solve_batch(scene, commands, chunk_size=3)
+    monkeypatch.undo()
+    np.testing.assert_allclose(two.q, one.q, rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(two.steps, one.steps)
+    assert np.all(two.converged)
+
+    parts = pj.iter_batch(scene, commands, chunk_size=3)
+    rows, _ = next(parts)
+    assert rows == slice(0, 3)
+    parts.close()
+    assert threading.active_count() == threads
+
+    def broken(sc, m):
+        raise RuntimeError("update failed")
+
+    with pytest.raises(RuntimeError, match="update failed"):
+        pj.solve_batch(scene, commands, chunk_size=3, params=np.zeros(12), update=broken)
+    assert threading.active_count() == threads
+
+
 def test_known_load_site_is_static_and_agrees_with_a_traced_site(scene):
     # A load site known before the solve is compiled in as a knot; a traced one (here under
     # jit) is integrated on its own. Both are the same physics.
