@@ -386,9 +386,9 @@ def _lanes(chunk: int, sharding, warm_start: bool) -> int:
     (small kernels run on one thread, and the host works between rounds), so on a single CPU
     device :data:`CPU_LANES` pools share the rows, each in its own thread and with the same
     compiled round: the paper's robot with PAC, 1,000 rows, ran in 0.91-1.02 s on 2 cores
-    (1.85-1.91 of them busy) against 1.11-1.22 s in one pool. Not with several devices (their shards already run in
-    parallel) and not with warm starts (a row's start would depend on which rows the other pool
-    had finished by then)."""
+    (1.85-1.91 of them busy) against 1.11-1.22 s in one pool. Not with several devices (their
+    shards already run in parallel) and not with warm starts (a row's start would depend on
+    which rows the other pool had finished by then)."""
     if sharding is not None or warm_start or jax.default_backend() != "cpu":
         return 1
     return max(1, min(CPU_LANES, chunk))
