@@ -78,15 +78,15 @@ def test_pools_side_by_side_agree_with_one_pool_and_stop_cleanly(scene, monkeypa
     # the caller.
     import threading
 
-    from pacjax import _batch
+    from pacjax import _pool
 
     commands = np.random.default_rng(5).uniform(0.0, 0.012, (12, 3))
-    assert _batch._lanes(3, None, warm_start=False) == 2
-    assert _batch._lanes(3, None, warm_start=True) == 1
-    assert _batch._lanes(1, None, warm_start=False) == 1
+    assert _pool._lanes(3, None, warm_start=False) == 2
+    assert _pool._lanes(3, None, warm_start=True) == 1
+    assert _pool._lanes(1, None, warm_start=False) == 1
     threads = threading.active_count()
     two = pj.solve_batch(scene, commands, chunk_size=3)
-    monkeypatch.setattr(_batch, "CPU_LANES", 1)
+    monkeypatch.setattr(_pool, "CPU_LANES", 1)
     one = pj.solve_batch(scene, commands, chunk_size=3)
     monkeypatch.undo()
     np.testing.assert_allclose(two.q, one.q, rtol=0, atol=1e-12)
