@@ -31,14 +31,14 @@ scene = pj.Scene(
 )
 commands = np.random.default_rng(0).uniform(0.0, 0.01, (6, 3))
 # Record over how many devices the solver pool's state lives, round after round.
-import pacjax._batch as batch_module
+import pacjax._pool as pool_module
 pool_devices = []
-advance = batch_module._advance
+advance = pool_module._advance
 def spy(*args):
     out = advance(*args)
     pool_devices.append(len(out[0].devices()))
     return out
-batch_module._advance = spy
+pool_module._advance = spy
 two = pj.solve_batch(scene, commands, chunk_size=4)             # default: every device
 two_devices = list(pool_devices)
 one = pj.solve_batch(scene, commands, chunk_size=4, devices=1)
