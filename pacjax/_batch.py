@@ -18,7 +18,6 @@ process passes the rows it owns and shards them over its own devices; see docs/m
 import dataclasses
 from collections.abc import Callable, Iterator
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import jax.tree_util as jtu
@@ -35,12 +34,13 @@ from ._equilibrium import (
     solver_dtype,
     static_load_sites,
 )
+from ._jit import jit
 from ._pool import _lanes, _pad, _pool_slots, _pool_solve
 from ._scene import Scene
 from ._solution import Equilibrium
 
 
-@eqx.filter_jit
+@jit
 def _solve_chunk(scene, controls, q0, opts, params, update, conservative=False):
     def one(u, q, p):
         sc = scene if update is None else update(scene, p)

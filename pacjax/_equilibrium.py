@@ -39,6 +39,7 @@ from ._continuation import (
     order_step,
 )
 from ._hessian import dead_followers, energy_derivatives, follower_jacobian
+from ._jit import jit
 from ._ptc import PseudoTransientContinuation, final_code, max_abs
 from ._robot import concrete
 from ._scene import Scene, SceneConstants
@@ -354,7 +355,7 @@ def solve_core(scene: Scene, controls, q0, opts: SolverOptions) -> Equilibrium:
     return equilibrium_from(scene, frozen, solver, sol.value, sol.state, steps, opts.tol)
 
 
-_solve = eqx.filter_jit(solve_core)
+_solve = jit(solve_core)
 
 
 def check_controls(scene: Scene, controls, dtype, batched: bool = False) -> jax.Array:

@@ -10,7 +10,6 @@ own thread (:func:`_lanes`); with several devices the pool is sharded along the 
 import queue
 import threading
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import jax.tree_util as jtu
@@ -23,6 +22,7 @@ from ._equilibrium import (
     max_total_steps,
     start_point,
 )
+from ._jit import jit
 
 #: Continuation steps per round of the slot pool (a finished row waits at most this many
 #: steps for its slot to be refilled): 2 on CPU, 4 on accelerators (see :func:`_steps_per_round`).
@@ -42,7 +42,7 @@ def _steps_per_round() -> int:
 _TAGS = frozenset()
 
 
-@eqx.filter_jit
+@jit
 def _start_block(scene, opts, update, controls, params, q0):
     """Scaled starting points (:func:`pacjax._equilibrium.start_point`) of a block of rows."""
 
@@ -53,7 +53,7 @@ def _start_block(scene, opts, update, controls, params, q0):
     return jax.vmap(one)(controls, params, q0)
 
 
-@eqx.filter_jit
+@jit
 def _advance(scene, opts, update, controls, params, y, state, reset, y_reset, active):
     """One round of the slot pool: restart the ``reset`` slots from ``y_reset`` (scaled
     starting points from :func:`_start_block`, computed once per row rather than for every slot
@@ -227,29 +227,29 @@ def _pool_solve(
     a time. Yields ``(rows, q_start, Equilibrium)`` of finished rows."""
     blocks = _StartBlocks(scene, controls, starts, params, update, opts, block, dtype, sharding)
     queue_ = _RowQueue(controls.shape[0], blocks)
+    ready = _RoundCompile(scene, controls, params, update, opts, size, dtype, sharding)
+    ready.start()
     args = (scene, controls, queue_, params, update, opts, size, dtype, sharding)
     if lanes == 1:
-        yield from _pool_lane(*args)
+        try:
+            yield from _pool_lane(*args, ready=ready)
+        finally:
+            ready.join()
         return
     results: queue.SimpleQueue = queue.SimpleQueue()
     stop = threading.Event()
-    # The first round compiles; the other pools wait for it rather than compile it again.
-    compiled = threading.Event()
 
-    def run(lane):
+    def run():
         try:
-            if lane > 0:
-                compiled.wait()
-            for item in _pool_lane(*args, stop=stop, compiled=compiled if lane == 0 else None):
+            for item in _pool_lane(*args, stop=stop, ready=ready):
                 results.put(item)
         except BaseException as error:  # handed to the caller's thread
             stop.set()
             results.put(error)
         finally:
-            compiled.set()
             results.put(_LANE_DONE)
 
-    threads = [threading.Thread(target=run, args=(k,), daemon=True) for k in range(lanes)]
+    threads = [threading.Thread(target=run, daemon=True) for _ in range(lanes)]
     for t in threads:
         t.start()
     try:
@@ -267,6 +267,7 @@ def _pool_solve(
         stop.set()
         for t in threads:
             t.join()
+        ready.join()
 
 
 def _pool_lane(
@@ -280,18 +281,14 @@ def _pool_lane(
     dtype,
     sharding,
     stop=None,
-    compiled=None,
+    ready=None,
 ):
     """One pool of ``size`` slots taking rows from ``rows_queue`` until it is empty (or
-    ``stop`` is set); ``compiled`` is set after its first round."""
+    ``stop`` is set); its rounds wait for ``ready`` (the round compiled, see
+    :class:`_RoundCompile`)."""
     slot_row = np.full(size, -1)
-    u_pool = np.zeros((size, controls.shape[1]))
+    u_pool, p_pool, y_pool = _empty_pool(scene, controls, params, size)
     q_pool = np.zeros((size, scene.n_dofs))
-    y_pool = np.zeros((size, scene.n_dofs))
-    if params is None:
-        p_pool = np.zeros((size,))
-    else:
-        p_pool = jtu.tree_map(lambda x: np.zeros((size,) + x.shape[1:], x.dtype), params)
     y, state = _initial_state(scene, opts, size, dtype, sharding)
     while stop is None or not stop.is_set():
         free = np.flatnonzero(slot_row < 0)
@@ -311,27 +308,72 @@ def _pool_lane(
         active = slot_row >= 0
         if not active.any():
             return
-        inputs = (
-            jnp.asarray(u_pool, dtype),
-            jtu.tree_map(jnp.asarray, p_pool),
-            jnp.asarray(reset),
-            jnp.asarray(y_pool, dtype),
-            jnp.asarray(active),
-        )
-        if sharding is not None:
-            inputs = jax.device_put(inputs, sharding)
-        u_dev, p_dev, reset_dev, y_dev, active_dev = inputs
-        y, state, done, eq = _advance(
-            scene, opts, update, u_dev, p_dev, y, state, reset_dev, y_dev, active_dev
+        if ready is not None:
+            ready.wait()
+        y, state, done, eq = _round(
+            scene, opts, update, dtype, sharding, u_pool, p_pool, y, state, reset, y_pool, active
         )
         done = np.asarray(done) & active
-        if compiled is not None:
-            compiled.set()
         if done.any():
             slots = np.flatnonzero(done)
             eq_rows = jtu.tree_map(lambda x, s=slots: np.asarray(x)[s], eq)
             yield slot_row[slots], q_pool[slots].copy(), eq_rows
             slot_row[slots] = -1
+
+
+def _empty_pool(scene, controls, params, size):
+    """Host buffers of a pool's commands, parameters and scaled starting points."""
+    u_pool = np.zeros((size, controls.shape[1]))
+    y_pool = np.zeros((size, scene.n_dofs))
+    if params is None:
+        p_pool = np.zeros((size,))
+    else:
+        p_pool = jtu.tree_map(lambda x: np.zeros((size,) + x.shape[1:], x.dtype), params)
+    return u_pool, p_pool, y_pool
+
+
+def _round(scene, opts, update, dtype, sharding, u_pool, p_pool, y, state, reset, y_pool, active):
+    """One :func:`_advance` round from the pool's host buffers."""
+    inputs = (
+        jnp.asarray(u_pool, dtype),
+        jtu.tree_map(jnp.asarray, p_pool),
+        jnp.asarray(reset),
+        jnp.asarray(y_pool, dtype),
+        jnp.asarray(active),
+    )
+    if sharding is not None:
+        inputs = jax.device_put(inputs, sharding)
+    u_dev, p_dev, reset_dev, y_dev, active_dev = inputs
+    return _advance(scene, opts, update, u_dev, p_dev, y, state, reset_dev, y_dev, active_dev)
+
+
+class _RoundCompile(threading.Thread):
+    """Compiles the pool's round in the background (a round with no slot active), while the
+    first block of starting points is traced, compiled and computed: the two compilations
+    overlap. The pools wait for it (:meth:`wait`), which raises what it raised."""
+
+    def __init__(self, scene, controls, params, update, opts, size, dtype, sharding):
+        super().__init__(daemon=True)
+        self.args = (scene, controls, params, update, opts, size, dtype, sharding)
+        self.error = None
+
+    def run(self):
+        scene, controls, params, update, opts, size, dtype, sharding = self.args
+        try:
+            u_pool, p_pool, y_pool = _empty_pool(scene, controls, params, size)
+            y, state = _initial_state(scene, opts, size, dtype, sharding)
+            idle = np.zeros(size, bool)
+            out = _round(
+                scene, opts, update, dtype, sharding, u_pool, p_pool, y, state, idle, y_pool, idle
+            )
+            jax.block_until_ready(out)
+        except BaseException as error:  # raised again in the pools' threads
+            self.error = error
+
+    def wait(self):
+        self.join()
+        if self.error is not None:
+            raise self.error
 
 
 def _pad(x, size):
