@@ -198,6 +198,44 @@ class _Scaled(eqx.Module):
         jac = self.row[:, None] * hessian * self.sigma[None, :]
         return jac, (grad * self.row, (merit, self.weights()))
 
+    def moved(self, y, dy):
+        """The iterate after the continuation step ``dy`` from ``y``: ``y + dy``, except for the
+        bending of a PCC/PAC segment whose plane angle ``phi`` is free (torsion-free frame) and
+        whose end is turned (``theta = beta . c != 0``, the bending angle at its end).
+
+        There the curvatures ``c`` and ``phi`` are polar coordinates. A tendon's length in the
+        segment, ``-r theta cos(phi - alpha)`` up to the chords, is linear in the bending vector
+        ``B = theta e(phi)`` (``e(phi)`` the plane's direction) and bilinear in ``(c, phi)``, so
+        steps along ``phi`` crept (3-4 steps for the plane's turn on the paper's robot). The
+        step is taken on ``B``: ``B' = B + dtheta e(phi) + theta dphi e'(phi)``, the plane
+        turned to ``B'`` by less than a quarter turn (a bend that passes through straight goes
+        on with ``theta < 0``), and every curvature carried along as a vector in the plane,
+        ``c' = (c + dc) cos(turn) + c dphi sin(turn)``, so that ``theta' e(phi') = B'``. This
+        agrees with ``y + dy`` to first order: the step's descent and the search along it are
+        unchanged. On the paper's robot with PAC (64 random commands, 200 g tip mass) a row took
+        6.5 continuation steps (mean) against 8.0; moving the plane to the principal axis of
+        the curvatures' vectors instead took 6.9-7.0.
+        """
+        k = self.scene.model.free_plane_angle()
+        if k is None:
+            return y + dy
+        n, d = self.scene.n_segments, self.scene.dofs_per_segment
+        q = (self.sigma * y).reshape(n, d)
+        dq = (self.sigma * dy).reshape(n, d)
+        beta = self.scene.model.plane_angle_basis(jnp.ones((), y.dtype))
+        c, dc, dphi = q[:, :k], dq[:, :k], dq[:, k]
+        theta = c @ beta
+        ahead = theta + dc @ beta
+        # The angle of B' from e(phi), in (-pi/2, pi/2]: arctan(theta dphi / (theta + dtheta)).
+        turn = jnp.arctan2(theta * dphi * jnp.where(ahead < 0, -1.0, 1.0), jnp.abs(ahead))
+        c_new = (c + dc) * jnp.cos(turn)[:, None] + c * (dphi * jnp.sin(turn))[:, None]
+        # An end that is not turned (straight, or an S of PAC) has no B to move: y + dy.
+        flat = theta == 0
+        c_new = jnp.where(flat[:, None], c + dc, c_new)
+        turn = jnp.where(flat, dphi, turn)
+        q_new = (q + dq).at[:, :k].set(c_new).at[:, k].set(q[:, k] + turn)
+        return q_new.reshape(-1) / self.sigma
+
     def aligned(self, y, tol: float, keep=None):
         """``y`` with the bending plane of each straight segment turned to the force on it.
 

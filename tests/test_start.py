@@ -1,5 +1,6 @@
 """The solver's start: a straight PCC/PAC segment gets the bending plane of the force on it."""
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -140,3 +141,85 @@ def test_simulation_start_turns_straight_segments_at_rest_only():
     # Only the coordinates of the same configuration change: d(start)/d(q0) is the identity.
     jac = jax.jacfwd(lambda q: _aligned_rest_start(scene, u, q, zero, jnp.asarray(0.0)))(zero)
     np.testing.assert_array_equal(np.asarray(jac), np.eye(scene.n_dofs))
+
+
+@pytest.mark.parametrize("model", [pj.PCC(), pj.PAC()], ids=["PCC", "PAC"])
+def test_a_step_moves_the_bending_vector_along_a_line(model):
+    # A continuation step moves a segment's bending vector B = theta e(phi) (theta = beta . c,
+    # the bending angle at its end) by its linear change, dtheta e(phi) + theta dphi e'(phi),
+    # instead of moving phi along the arc; the curvatures turn with the plane, by less than a
+    # quarter turn (a bend through straight goes on with theta < 0); a segment whose end is
+    # not turned, and dL, move as y + dy; the move is y + dy to first order.
+    scene = pj.presets.stella2023(model, tip_mass=0.2)
+    problem = _Scaled.build(scene, jnp.asarray(_pull(1, 0), float))
+    n, d, k = scene.n_segments, scene.dofs_per_segment, model.free_plane_angle()
+    beta = np.asarray(model.plane_angle_basis(jnp.ones(())))
+    rng = np.random.default_rng(4)
+    y = 0.4 * rng.normal(size=(n, d))
+    y[0, :k] = 0.0  # a straight segment
+    dy = 0.3 * rng.normal(size=(n, d))
+    dy[1, :k] = -2.0 * y[1, :k]  # this bend passes through straight
+    q, dq = (np.asarray(problem.q(jnp.asarray(v.reshape(-1)))).reshape(n, d) for v in (y, dy))
+    moved = problem.moved(jnp.asarray(y.reshape(-1)), jnp.asarray(dy.reshape(-1)))
+    q_new = np.asarray(problem.q(moved)).reshape(n, d)
+
+    def bending(q):
+        phi = q[:, k]
+        return (q[:, :k] @ beta)[:, None] * np.stack([np.cos(phi), np.sin(phi)], axis=1), phi
+
+    b, phi = bending(q)
+    b_new, phi_new = bending(q_new)
+    e = np.stack([np.cos(phi), np.sin(phi)], axis=1)
+    e_turned = np.stack([-np.sin(phi), np.cos(phi)], axis=1)
+    theta, dtheta = q[:, :k] @ beta, dq[:, :k] @ beta
+    line = b + dtheta[:, None] * e + (theta * dq[:, k])[:, None] * e_turned
+    np.testing.assert_allclose(b_new[1:], line[1:], rtol=0, atol=1e-14)
+    # The curvatures turn with the plane: c' e(phi') is the projection of c e(phi) + dc e(phi)
+    # + c dphi e'(phi) on the new plane.
+    turn = phi_new - phi
+    along = (q + dq)[:, :k] * np.cos(turn)[:, None]
+    np.testing.assert_allclose(
+        q_new[1:, :k], (along + q[:, :k] * (dq[:, k] * np.sin(turn))[:, None])[1:], atol=1e-15
+    )
+    assert np.all(np.abs(turn) <= 0.5 * np.pi)
+    assert (q_new[1, :k] @ beta) * theta[1] < 0
+    np.testing.assert_array_equal(q_new[0], q[0] + dq[0])
+    np.testing.assert_allclose(q_new[:, k + 1 :], q[:, k + 1 :] + dq[:, k + 1 :], rtol=1e-15)
+
+    def gap(t):
+        step = t * dy.reshape(-1)
+        moved = problem.moved(jnp.asarray(y.reshape(-1)), jnp.asarray(step))
+        return np.max(np.abs(np.asarray(moved) - y.reshape(-1) - step))
+
+    assert 50 < gap(1e-3) / gap(1e-4) < 200
+    still = problem.moved(jnp.zeros(n * d), jnp.zeros(n * d))
+    assert np.all(np.asarray(still) == 0.0)
+
+
+def test_other_models_step_to_y_plus_dy():
+    for model in (pj.PAC(frame="paper"), pj.PolynomialCurvature(1)):
+        scene = pj.presets.stella2023(model, tip_mass=0.2)
+        problem = _Scaled.build(scene, jnp.asarray(_pull(1, 0), float))
+        y, dy = np.random.default_rng(1).normal(size=(2, scene.n_dofs))
+        np.testing.assert_array_equal(problem.moved(jnp.asarray(y), jnp.asarray(dy)), y + dy)
+
+
+def test_the_bending_vector_step_reaches_the_same_equilibria_in_fewer_steps(monkeypatch):
+    scene = pj.presets.stella2023(pj.PAC(), tip_mass=0.2)
+    commands = random_commands(32, seed=5)
+    curved = pj.solve_batch(scene, commands, fallback=False)
+    monkeypatch.setattr(_Scaled, "moved", lambda self, y, dy: y + dy)
+    jax.clear_caches()  # the compiled solver has the method traced in
+    straight = pj.solve_batch(scene, commands, fallback=False)
+    monkeypatch.undo()
+    jax.clear_caches()
+    for eq in (curved, straight):
+        assert np.all(eq.converged) and np.all(eq.stable)
+    tips = [
+        np.stack([np.asarray(pj.markers(scene, q))[-1] for q in eq.q]) for eq in (curved, straight)
+    ]
+    np.testing.assert_allclose(tips[0], tips[1], atol=1e-6)
+    assert np.mean(curved.steps) < 0.9 * np.mean(straight.steps), (
+        np.mean(curved.steps),
+        np.mean(straight.steps),
+    )
