@@ -100,6 +100,7 @@ class EnergyPlan:
                 world += ids.tolist()
         self.world_points = sorted(set(world))
         flat = self.knots.flat_index[np.asarray(self.world_points, np.int64)]
+        self._world_flat = flat
         self.world_runs = index_runs(flat)
         # The knot rows (within a segment) that the load energy reads: the segment ends (for
         # the chaining) and the world points.
@@ -112,8 +113,7 @@ class EnergyPlan:
         segment (``(n_segments, len(load_rows), ...)``): the load energy reads no other row,
         so its derivatives need the kinematics' linearisation there only."""
         other = copy.copy(self)
-        width, rows = self.knots.width, self.load_rows
-        flat = self.knots.flat_index[np.asarray(self.world_points, np.int64)]
+        width, rows, flat = self.knots.width, self.load_rows, self._world_flat
         other.world_runs = index_runs(
             (flat // width) * len(rows) + np.searchsorted(rows, flat % width)
         )

@@ -32,7 +32,7 @@ import jax.tree_util as jtu
 import numpy as np
 from jaxtyping import Array, Float
 
-from ._kinematics import index_runs
+from ._kinematics import contract, index_runs, jacobian_and_value
 from ._loads import PointForce, PointMoment
 from ._robot import known_sites
 from ._rotation import hat, matvec3
@@ -82,10 +82,6 @@ def energy_derivatives(
     dtype = q.dtype
     *frame_inputs, chords = scene._segment_inputs(plan, consts, dtype)
 
-    def value_and_jacobian(f, x):
-        jac, out = jax.jacfwd(lambda y: (f(y), f(y)), has_aux=True)(x)
-        return jac, out
-
     # Each segment's local kinematics (:meth:`Scene._segment_local`) and its Jacobian: the
     # frames by forward derivatives, and the tendon parts (when every chord lies in one segment)
     # written out from the frames' (:func:`pacjax._tendons.tendon_parts_derivatives`): as
@@ -100,7 +96,7 @@ def energy_derivatives(
     seg_val = (*f_val, None if chord_d is None else chord_d.parts)
     traced_sites = [k for k, _ in plan.points.traced]
     traced = [
-        value_and_jacobian(lambda y, k=k, s_k=s_k: scene._traced_local(y, k, s_k), coords[k])
+        jacobian_and_value(lambda y, k=k, s_k=s_k: scene._traced_local(y, k, s_k), coords[k])
         for k, s_k in plan.points.traced
     ]
     traced_val = tuple(v for _, v in traced)
@@ -128,13 +124,9 @@ def energy_derivatives(
     lam_seg, lam_traced = lam
 
     # Gradient: J^T lambda, segment by segment.
-    def pull(lam_tree, jac_tree):
-        leaves = zip(jtu.tree_leaves(lam_tree), jtu.tree_leaves(jac_tree), strict=True)
-        return sum(jnp.tensordot(lt, jt, axes=lt.ndim) for lt, jt in leaves)
-
-    grad = jax.vmap(pull)(lam_seg, seg_jac)
+    grad = jax.vmap(contract)(lam_seg, seg_jac)
     for k, lt, jt in zip(traced_sites, lam_traced, traced_jac, strict=True):
-        grad = grad.at[k].add(pull(lt, jt))
+        grad = grad.at[k].add(contract(lt, jt))
 
     # J^T d2Psi J: the Hessian of Psi along the linearised kinematics.
     def psi_linear(delta):
@@ -171,7 +163,7 @@ def energy_derivatives(
     for k, s_k, lt in zip(
         traced_sites, (s for _, s in plan.points.traced), lam_traced, strict=True
     ):
-        f = lambda y, k=k, s_k=s_k, lt=lt: pull(lt, scene._traced_local(y, k, s_k))  # noqa: E731
+        f = lambda y, k=k, s_k=s_k, lt=lt: contract(lt, scene._traced_local(y, k, s_k))  # noqa: E731
         blocks = blocks.at[k].add(jax.hessian(f)(coords[k]))
     h_curv = jax.scipy.linalg.block_diag(*[blocks[i] for i in range(n)])
 

@@ -135,6 +135,23 @@ def grid_frames(
     return world_rot, world_pos
 
 
+def jacobian_and_value(f, x):
+    """``(jax.jacfwd(f)(x), f(x))`` from one forward pass (``f``'s value is a pytree)."""
+
+    def both(y):
+        value = f(y)
+        return value, value
+
+    return jax.jacfwd(both, has_aux=True)(x)
+
+
+def contract(cotangent, tree):
+    """``sum`` over the leaves of ``cotangent . leaf``, contracting every axis of the cotangent's
+    leaf (a scalar for a value, a vector along ``x`` for a Jacobian)."""
+    leaves = zip(jax.tree_util.tree_leaves(cotangent), jax.tree_util.tree_leaves(tree), strict=True)
+    return sum(jnp.tensordot(lt, x, axes=lt.ndim) for lt, x in leaves)
+
+
 def index_runs(flat_index: np.ndarray) -> tuple[tuple[int, int], ...]:
     """``flat_index`` as runs ``(start, stop)`` of consecutive indices."""
     runs: list[list[int]] = []

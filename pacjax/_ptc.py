@@ -6,7 +6,9 @@ It integrates the damped flow ``D qdot = -F(q)`` with linearised implicit Euler 
 the residual (switched evolution relaxation), so the steps become Newton steps near the
 solution; a step that raises the merit (the energy for conservative scenes; see ``frozen_work``
 for the others) is rejected and ``dt`` shrinks until the step is a short stretch of the flow,
-which is a descent direction whatever the curvature. A converged saddle (smallest eigenvalue of
+which is a descent direction whatever the curvature. A step ``dy`` lands at the problem's
+``moved(y, dy)`` where it has one (equal to ``y + dy`` to first order; PCC/PAC bending moves as a
+vector, :meth:`pacjax._equilibrium._Scaled.moved`). A converged saddle (smallest eigenvalue of
 the scaled stiffness below ``-stability_tol``) is left along its negative-curvature direction, a
 bounded number of times, and the continuation then goes on until the stiffness is positive again
 (a residual below the tolerance next to the saddle is not convergence; for a non-conservative

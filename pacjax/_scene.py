@@ -19,8 +19,10 @@ from ._kinematics import (
     Knots,
     PointLayout,
     chain_segments,
+    contract,
     grid_frames,
     has_plane_derivatives,
+    jacobian_and_value,
     knot_frames,
     local_frame,
     segment_knot_curvature,
@@ -371,28 +373,18 @@ class Scene(eqx.Module):
         by forward derivatives otherwise."""
         if has_plane_derivatives(self.model):
             return segment_knot_jacobian(self.model, qi, length, knots, node_weights)
-
-        def frames(y):
-            value = self._segment_frames(y, length, knots, node_weights)
-            return value, value
-
-        return jax.jacfwd(frames, has_aux=True)(qi)
+        return jacobian_and_value(
+            lambda y: self._segment_frames(y, length, knots, node_weights), qi
+        )
 
     def _segment_frames_curvature(self, qi, lam, length, knots, node_weights):
         """Hessian along ``qi`` of ``lam . frames(qi)`` (``lam`` a cotangent of
         :meth:`_segment_frames`' value)."""
         if has_plane_derivatives(self.model):
             return segment_knot_curvature(self.model, qi, length, knots, node_weights, lam)
-
-        def pull(y):
-            leaves = zip(
-                jax.tree_util.tree_leaves(lam),
-                jax.tree_util.tree_leaves(self._segment_frames(y, length, knots, node_weights)),
-                strict=True,
-            )
-            return sum(jnp.sum(lt * x) for lt, x in leaves)
-
-        return jax.hessian(pull)(qi)
+        return jax.hessian(
+            lambda y: contract(lam, self._segment_frames(y, length, knots, node_weights))
+        )(qi)
 
     def _segment_local(self, qi, length, knots, node_weights, chords):
         """One segment's part of the local kinematics: its knot frames and weighted tangent
