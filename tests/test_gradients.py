@@ -106,6 +106,19 @@ def _tip_loss(params, q0):
     return _tip(scene, _equilibrium_q(params, q0)) @ TIP_WEIGHTS
 
 
+# Newton steps (dt from 1e8) from a converged solve, to the round-off floor: a solve stops
+# anywhere below its tolerance (the base solve at 2.4e-13, its shifted ones at 1.7e-13 and
+# 5e-13), and divided by a step h of 1e-5 relative that left errors of 5e-6 to 9e-6 in the
+# finite differences of the gain and the mass.
+POLISH = dict(tol=1e-16, initial_dt=1e8, max_steps=3, escapes=0, fallback=False)
+
+
+def _polished(scene, controls, q):
+    eq = pj.solve_equilibrium(scene, controls, q, **POLISH)
+    assert float(eq.residual_norm) < 1e-13, float(eq.residual_norm)
+    return np.asarray(eq.q)
+
+
 @pytest.fixture(scope="module")
 def reference():
     """The equilibrium at the base parameters, and central differences of ``q`` and the loss."""
@@ -134,8 +147,8 @@ def reference():
                 # Warm start: the same branch.
                 s_eq = pj.solve_equilibrium(s_scene, s_controls, eq.q, **OPTIONS)
                 assert bool(s_eq.converged)
-                q = np.asarray(s_eq.q)
-                values.append((q, float(_tip(s_scene, s_eq.q) @ TIP_WEIGHTS)))
+                q = _polished(s_scene, s_controls, s_eq.q)
+                values.append((q, float(_tip(s_scene, jnp.asarray(q)) @ TIP_WEIGHTS)))
             cols_q.append((values[0][0] - values[1][0]) / (2 * h))
             cols_loss.append((values[0][1] - values[1][1]) / (2 * h))
         fd_q[name] = np.stack(cols_q, -1).reshape(-1, *base.shape)
@@ -154,7 +167,7 @@ def test_grad_of_tip_loss_matches_finite_differences(reference):
     grad = jax.grad(_tip_loss)(BASE_PARAMS, BASE.zeros())
     errors = {name: _relative_error(grad[name], fd_loss[name]) for name in PARAMS}
     print("grad vs FD, relative:", errors)
-    # Measured: 5e-9 (controls), 8e-8 (gain), 6e-9 (EI), 1e-9 (mass), 2e-9 (force).
+    # Measured: 3e-11 (controls), 2.2e-8 (gain), 6e-10 (EI), 1.5e-10 (mass), 1e-10 (force).
     for name in PARAMS:
         assert np.all(np.abs(fd_loss[name]) > 0) or name == "force", (name, fd_loss[name])
         assert errors[name] < 1e-6, errors
@@ -178,10 +191,11 @@ def test_jacfwd_of_equilibrium_matches_finite_differences(reference):
         assert jac[name].shape == fd_q[name].shape
         errors[name] = _relative_error(jac[name], fd_q[name])
     print("jacfwd vs FD, relative:", errors)
-    # Measured: 1.3e-7 (controls), 1.3e-7 (gain), 2.4e-8 (EI), 5e-9 (mass), 8e-9 (force). The
-    # larger ones do not change with the step h: they are the finite differences' error (the
-    # derivative of the solver's last iterate, which stops at a residual ~1e-13, not of the
-    # exact equilibrium that the implicit function theorem differentiates).
+    # Measured: 6e-11 (controls), 3.1e-9 (gain), 3.9e-10 (EI), 4.7e-10 (mass), 7e-11 (force),
+    # with the finite differences' solves polished to the round-off floor (:data:`POLISH`);
+    # from the solves as they stop below their tolerance, up to 9e-6 (the derivative of the
+    # solver's last iterate, not of the exact equilibrium the implicit function theorem
+    # differentiates).
     assert max(errors.values()) < 1e-6, errors
 
 
