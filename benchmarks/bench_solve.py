@@ -7,7 +7,8 @@ steps, and equilibria per second for a batch of random commands (0-20 mm pull-in
 payload), with the fraction converged and stable. Ratios are against PCC measured in the same
 run. Timings are wall-clock on this machine; nothing here is asserted.
 
-``pacjax bench`` (:mod:`pacjax.bench`) extends this: float32, several batch sizes, the plain-flow
+``pacjax bench`` (:mod:`pacjax.cli.bench`) extends this: float32, several batch sizes, the
+plain-flow
 baseline and the gradient cost, to JSON and Markdown. The models and the timer are shared.
 """
 
@@ -19,8 +20,8 @@ import jax
 import numpy as np
 
 import pacjax as pj
-from pacjax.bench import MODELS
-from pacjax.bench import timed as _time
+from pacjax.cli.bench import MODELS
+from pacjax.cli.bench import timed as _time
 
 
 def run(batch: int, repeats: int, seed: int = 0) -> dict:

@@ -17,7 +17,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import pacjax as pj
-from pacjax import bench
+from pacjax.cli import bench
 
 
 def main():

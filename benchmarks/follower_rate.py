@@ -18,8 +18,8 @@ import jax
 import numpy as np
 
 import pacjax as pj
-from pacjax.bench import MODELS
-from pacjax.bench import timed as _time
+from pacjax.cli.bench import MODELS
+from pacjax.cli.bench import timed as _time
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "experiments" / "error_vs_runtime"))
 import study  # noqa: E402

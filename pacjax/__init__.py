@@ -2,43 +2,44 @@
 curvature) in JAX."""
 
 from . import _config as _config  # noqa: F401  (float64 by default)
-from ._loads import Gravity as Gravity
-from ._loads import PointForce as PointForce
-from ._loads import PointMass as PointMass
-from ._loads import PointMoment as PointMoment
-from ._robot import ExponentialStiffening as ExponentialStiffening
-from ._robot import Robot as Robot
-from ._robot import Segment as Segment
-from ._robot import StiffeningLaw as StiffeningLaw
-from ._scene import Scene as Scene
-from ._strain import PAC as PAC
-from ._strain import PCC as PCC
-from ._strain import PolynomialCurvature as PolynomialCurvature
-from ._strain import StrainModel as StrainModel
-from ._tendons import Tendon as Tendon
+from . import _deprecated as _deprecated
+from ._model.loads import Gravity as Gravity
+from ._model.loads import PointForce as PointForce
+from ._model.loads import PointMass as PointMass
+from ._model.loads import PointMoment as PointMoment
+from ._model.robot import ExponentialStiffening as ExponentialStiffening
+from ._model.robot import Robot as Robot
+from ._model.robot import Segment as Segment
+from ._model.robot import StiffeningLaw as StiffeningLaw
+from ._model.scene import Scene as Scene
+from ._model.strain import PAC as PAC
+from ._model.strain import PCC as PCC
+from ._model.strain import PolynomialCurvature as PolynomialCurvature
+from ._model.strain import StrainModel as StrainModel
+from ._model.tendons import Tendon as Tendon
 
 __version__ = "0.1.0"
 from . import dynamics as dynamics
 from . import inverse as inverse
 from . import presets as presets
-from ._api import astype as astype
-from ._api import backbone as backbone
-from ._api import markers as markers
-from ._api import tendon_tensions as tendon_tensions
-from ._api import tip_pose as tip_pose
-from ._batch import iter_batch as iter_batch
-from ._batch import solve_batch as solve_batch
-from ._equilibrium import SolverOptions as SolverOptions
-from ._equilibrium import solve_equilibrium as solve_equilibrium
-from ._fitreport import IdentificationReport as IdentificationReport
-from ._identify import identify as identify
-from ._mocap import MocapDataset as MocapDataset
-from ._mocap import static_frames as static_frames
-from ._multistart import Equilibria as Equilibria
-from ._multistart import find_equilibria as find_equilibria
-from ._solution import Equilibrium as Equilibrium
-from ._synthetic import high_fidelity as high_fidelity
-from ._synthetic import synthetic_mocap as synthetic_mocap
+from ._identify.dataset import MocapDataset as MocapDataset
+from ._identify.dataset import static_frames as static_frames
+from ._identify.identify import identify as identify
+from ._identify.report import IdentificationReport as IdentificationReport
+from ._identify.synthetic import high_fidelity as high_fidelity
+from ._identify.synthetic import synthetic_mocap as synthetic_mocap
+from ._model.query import astype as astype
+from ._model.query import backbone as backbone
+from ._model.query import markers as markers
+from ._model.query import tendon_tensions as tendon_tensions
+from ._model.query import tip_pose as tip_pose
+from ._statics.batch import iter_batch as iter_batch
+from ._statics.batch import solve_batch as solve_batch
+from ._statics.equilibrium import solve_equilibrium as solve_equilibrium
+from ._statics.multistart import Equilibria as Equilibria
+from ._statics.multistart import find_equilibria as find_equilibria
+from ._statics.options import SolverOptions as SolverOptions
+from ._statics.solution import Equilibrium as Equilibrium
 from .dynamics import Damping as Damping
 from .dynamics import Trajectory as Trajectory
 from .dynamics import simulate as simulate
@@ -49,3 +50,5 @@ from .inverse import inverse_statics as inverse_statics
 from .inverse import inverse_statics_batch as inverse_statics_batch
 from .inverse import sample_workspace as sample_workspace
 from .inverse import track as track
+
+_deprecated.install()

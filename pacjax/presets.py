@@ -9,11 +9,11 @@ import math
 
 import numpy as np
 
-from ._loads import Gravity, PointMass
-from ._robot import ExponentialStiffening, Robot, Segment
-from ._scene import Scene
-from ._strain import PAC, StrainModel
-from ._tendons import Tendon
+from ._model.loads import Gravity, PointMass
+from ._model.robot import ExponentialStiffening, Robot, Segment
+from ._model.scene import Scene
+from ._model.strain import PAC, StrainModel
+from ._model.tendons import Tendon
 
 #: Free (quasi-static) length of one segment, m. Paper: "stabilized around 135.4 mm".
 SEGMENT_LENGTH = 0.1354

@@ -78,12 +78,12 @@ def test_pools_side_by_side_agree_with_one_pool_and_stop_cleanly(scene, monkeypa
     # the caller.
     import threading
 
-    from pacjax import _pool
+    from pacjax._statics import pool as _pool
 
     commands = np.random.default_rng(5).uniform(0.0, 0.012, (12, 3))
-    assert _pool._lanes(3, None, warm_start=False) == 2
-    assert _pool._lanes(3, None, warm_start=True) == 1
-    assert _pool._lanes(1, None, warm_start=False) == 1
+    assert _pool.pool_lanes(3, None, warm_start=False) == 2
+    assert _pool.pool_lanes(3, None, warm_start=True) == 1
+    assert _pool.pool_lanes(1, None, warm_start=False) == 1
     threads = threading.active_count()
     two = pj.solve_batch(scene, commands, chunk_size=3)
     monkeypatch.setattr(_pool, "CPU_LANES", 1)

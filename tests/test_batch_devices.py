@@ -31,7 +31,7 @@ scene = pj.Scene(
 )
 commands = np.random.default_rng(0).uniform(0.0, 0.01, (6, 3))
 # Record over how many devices the solver pool's state lives, round after round.
-import pacjax._pool as pool_module
+import pacjax._statics.pool as pool_module
 pool_devices = []
 advance = pool_module._advance
 def spy(*args):
@@ -85,7 +85,7 @@ import json
 import jax
 import numpy as np
 import pacjax as pj
-from pacjax.bench import random_commands
+from pacjax.cli.bench import random_commands
 
 assert len(jax.devices()) == 2, jax.devices()
 scene = pj.presets.stella2023(pj.PAC(), tip_mass=0.2)
@@ -98,12 +98,12 @@ print(json.dumps({"converged": np.asarray(eq.converged).tolist(), "q": np.asarra
 @pytest.mark.slow  # two compilations of the paper's robot in a fresh interpreter
 def test_paper_robot_sharded_over_two_cpu_devices_does_not_hang():
     """48 slots per device of a 12 x 12 eigen-decomposition: past jaxlib 0.10's threshold for
-    its parallel LAPACK path, which hung when both devices took it at once (pacjax._linalg).
+    its parallel LAPACK path, which hung when both devices took it at once (pacjax._statics.linalg).
     Before the fix this run waited forever at 0 % CPU; now it takes about a minute."""
     out = _on_two_cpu_devices(PAPER_ROBOT, timeout=600)
     assert all(out["converged"])
     import pacjax as pj
-    from pacjax.bench import random_commands
+    from pacjax.cli.bench import random_commands
 
     one = pj.solve_batch(pj.presets.stella2023(pj.PAC(), tip_mass=0.2), random_commands(96)[:8])
     np.testing.assert_allclose(np.asarray(out["q"])[:8], np.asarray(one.q), rtol=0, atol=1e-8)

@@ -1,4 +1,4 @@
-"""``pacjax batch`` and :mod:`pacjax.batchrun`: samplers, default ranges, the HDF5 columns, bad
+"""``pacjax batch`` and :mod:`pacjax.cli.batchrun`: samplers, default ranges, the HDF5 columns, bad
 input rejected before anything is compiled."""
 
 import json
@@ -11,10 +11,10 @@ import pytest
 from click.testing import CliRunner
 
 import pacjax as pj
-from pacjax import batchrun
-from pacjax._equilibrium import static_load_sites
-from pacjax.cli import cli
-from pacjax.scenefile import scene_from_toml
+from pacjax._model.inputs import static_load_sites
+from pacjax.cli import batchrun
+from pacjax.cli.main import cli
+from pacjax.io.scenefile import scene_from_toml
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 

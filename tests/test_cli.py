@@ -8,8 +8,8 @@ import pytest
 from click.testing import CliRunner
 
 from pacjax import plots
-from pacjax.cli import DEMO_COMMANDS, cli
-from pacjax.scenefile import load_scene
+from pacjax.cli.main import DEMO_COMMANDS, cli
+from pacjax.io.scenefile import load_scene
 
 SCENES = pathlib.Path(__file__).resolve().parent.parent / "experiments" / "scenes"
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"

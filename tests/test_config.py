@@ -46,7 +46,8 @@ def test_non_symmetric_step_factorises_once():
     batched LAPACK kernels then deadlock on a 2-core machine (both wait on sub-tasks queued to
     the same two-thread pool); the step must factorise both matrices in one call."""
     import pacjax as pj
-    from pacjax._equilibrium import SolverOptions, solve_core
+    from pacjax._statics.equilibrium import solve_core
+    from pacjax._statics.options import SolverOptions
 
     force = pj.PointForce((0.0, 0.0, 1.0), segment=0, s=1.0, follower=True)
     scene = pj.presets.stella2023(pj.PAC(), n_sections=1, loads=(force,), quadrature_points=4)
@@ -72,8 +73,9 @@ def _lapack_batches(hlo: str, target: str) -> list[int]:
 def test_solver_linear_algebra_runs_in_inline_sized_lapack_calls(batch):
     """Under vmap, the solver's eigh and solve give the plain batched results, but each LAPACK
     call holds at most ``inline_group`` problems, below jaxlib 0.10's threshold for its
-    thread-pool path (which hangs when several such calls run at once, see pacjax._linalg)."""
-    from pacjax import _linalg
+    thread-pool path (which hangs when several such calls run at once, see
+    pacjax._statics.linalg)."""
+    from pacjax._statics import linalg as _linalg
 
     rng = np.random.default_rng(0)
     a = rng.normal(size=(batch, 12, 12))
@@ -102,7 +104,8 @@ def test_batched_solver_makes_inline_sized_lapack_calls():
     32 in calls of at most 8 (one call of 32 took jaxlib 0.10's thread-pool path and hung with
     the pool sharded over two CPU devices)."""
     import pacjax as pj
-    from pacjax._equilibrium import SolverOptions, solve_core
+    from pacjax._statics.equilibrium import solve_core
+    from pacjax._statics.options import SolverOptions
 
     scene = pj.presets.stella2023(pj.PAC(), tip_mass=0.2)
     u = jnp.zeros((32, scene.n_tendons))

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import pacjax as pj
-from pacjax._energy import STOP_BAND, contraction_stop_energy
+from pacjax._model.energy import STOP_BAND, contraction_stop_energy
 
 LIMIT = 0.07  # m, the paper robot's range
 K_A = 1078.0  # N/m

@@ -19,8 +19,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import pacjax as pj
-from pacjax._continuation import conservative_part
-from pacjax._energy import STOP_BAND
+from pacjax._model.energy import STOP_BAND
+from pacjax._statics.continuation import conservative_part
 
 # The whole file runs in CI's slow step:
 # extreme cases in two precisions: minutes of compilation on 2 cores.
@@ -283,7 +283,7 @@ def test_structured_jacobian_of_a_non_conservative_scene_is_the_autodiff_one():
     """The solver's Jacobian of a scene with a follower force and a local moment: structured
     Hessian of the energy minus the forward derivative of those loads alone, equal to
     ``jax.jacfwd`` of the whole residual."""
-    from pacjax._equilibrium import _Scaled
+    from pacjax._statics.problem import ScaledProblem
 
     loads = (
         pj.PointForce((0.5, 0.0, 2.0), segment=1, s=1.0, follower=True),
@@ -292,7 +292,7 @@ def test_structured_jacobian_of_a_non_conservative_scene_is_the_autodiff_one():
     scene = pj.presets.stella2023(pj.PAC(), n_sections=2, loads=loads, quadrature_points=4)
     assert not scene.is_conservative
     u = jnp.asarray(np.random.default_rng(3).uniform(0.0, 0.01, scene.n_tendons))
-    problem = _Scaled.build(scene, u)
+    problem = ScaledProblem.build(scene, u)
     y = jnp.asarray(np.random.default_rng(4).normal(size=scene.n_dofs)) * 0.3
     jac, (r, (merit, _)) = eqx.filter_jit(lambda p, x: p.linearise(x))(problem, y)
     expected, residual = eqx.filter_jit(lambda p, x: (jax.jacfwd(p.residual)(x), p.residual(x)))(
@@ -376,8 +376,8 @@ def test_order_continuation_reaches_a_row_the_straight_start_misses():
     (from the ``PolynomialCurvature(2)`` equilibrium, embedded) converges, with ``fallback=False``
     (no diffrax flow), in single and batch solves, to within 1 um of Poly2's tip (the model
     error of Poly2 under this load is 0.15 um against Poly5)."""
-    from pacjax._continuation import order_step
-    from pacjax.bench import random_commands
+    from pacjax._statics.continuation import order_step
+    from pacjax.cli.bench import random_commands
 
     commands = random_commands(24, seed=1)
     scene = _poly_follower(3)

@@ -1,10 +1,11 @@
-"""The safeguards of the fit's Levenberg-Marquardt loop (pacjax._identify._LevenbergMarquardt):
+"""The safeguards of the fit's Levenberg-Marquardt loop
+(pacjax._identify.identify._LevenbergMarquardt):
 a bounded step and a damping that follows the gain ratio."""
 
 import numpy as np
 import pytest
 
-from pacjax._identify import _LevenbergMarquardt
+from pacjax._identify.identify import _LevenbergMarquardt
 
 
 def _problem():

@@ -17,9 +17,9 @@ import pytest
 from click.testing import CliRunner
 
 import pacjax as pj
-from pacjax.cli import cli
-from pacjax.mocapfile import save_mocap
-from pacjax.scenefile import save_scene
+from pacjax.cli.main import cli
+from pacjax.io.mocapfile import save_mocap
+from pacjax.io.scenefile import save_scene
 
 # The whole file runs in CI's slow step:
 # fits compile batched solves and their Jacobians: minutes on 2 cores.
@@ -144,7 +144,7 @@ def test_report_json_and_fitted_scene_file(clean, tmp_path):
     assert len(d["train"]["frame_rmse_mm"]) == N_FRAMES and len(d["train"]["marker_rmse_mm"]) == 2
     assert d["validation"] is None
     save_scene(tmp_path / "fitted.toml", fitted)
-    from pacjax.scenefile import load_scene
+    from pacjax.io.scenefile import load_scene
 
     back, _, _ = load_scene(tmp_path / "fitted.toml")
     assert float(back.robot.segments[0].bending_stiffness) == pytest.approx(

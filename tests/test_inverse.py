@@ -17,6 +17,7 @@ import pytest
 
 import pacjax as pj
 from pacjax import inverse
+from pacjax._inverse import inverse as inverse_module
 
 # The whole file runs in CI's slow step:
 # least-squares through equilibria: minutes of compilation on 2 cores.
@@ -224,7 +225,7 @@ def test_batch_starts_follow_the_workspace_order(monkeypatch):
             np.full(m, 7),
         )
 
-    monkeypatch.setattr(inverse, "_solve_many", stub)
+    monkeypatch.setattr(inverse_module, "solve_many", stub)
     out = pj.inverse_statics_batch(SCENE, target, workspace=workspace, n_starts=3)
     np.testing.assert_allclose(seen[0], controls[0])
     np.testing.assert_allclose(seen[-1], controls[1])
@@ -271,7 +272,7 @@ def test_batch_matches_single_and_tension_limit(targets):
 def test_cli_inverse(tmp_path, targets):
     from click.testing import CliRunner
 
-    from pacjax.cli import cli
+    from pacjax.cli.main import cli
 
     _, points = targets
     scene_file = (

@@ -729,7 +729,7 @@ def test_closed_form_plane_frames_match_the_magnus_path(model, monkeypatch):
     """PCC and PAC bend in one plane per segment, and the kinematics takes their closed-form
     frames; the general Magnus path (exact for a fixed axis) must give the same energy,
     gradient, Hessian and frames on the paper's robot, far from straight."""
-    from pacjax._hessian import energy_derivatives
+    from pacjax._model.hessian import energy_derivatives
 
     scene = pj.presets.stella2023(model, tip_mass=0.2)
     q = jnp.asarray(np.random.default_rng(3).uniform(-1.0, 1.0, scene.n_dofs))
@@ -755,7 +755,7 @@ def test_order_step_maps_are_exact(twist):
     """Order continuation starts ``PolynomialCurvature(k)`` from the embedded equilibrium of
     order ``k - 1``: the embedding (a zero top coefficient per strain component) must give the
     same configuration, and truncation must undo it."""
-    from pacjax._continuation import order_step
+    from pacjax._statics.continuation import order_step
 
     segment = pj.Segment(0.1, 0.01, 500.0, linear_density=0.2)
     scene = pj.Scene(pj.Robot([segment, segment]), pj.PolynomialCurvature(3, twist=twist))
@@ -788,7 +788,8 @@ def test_follower_force_jacobian_as_dead_force_plus_turning_is_the_autodiff_one(
     forces (``follower_jacobian``) equals ``jax.jacfwd`` of the residual, and the residual and
     energy are the solver's own. ``PolynomialCurvature`` keeps the forward derivative of the
     forces (its frames move with the knots), so its problem carries no dead scene."""
-    from pacjax._equilibrium import _Scaled, static_load_sites
+    from pacjax._model.inputs import static_load_sites
+    from pacjax._statics.problem import ScaledProblem
 
     loads = (
         pj.PointForce((0.5, -0.3, 2.0), segment=1, s=1.0, follower=True),
@@ -797,7 +798,7 @@ def test_follower_force_jacobian_as_dead_force_plus_turning_is_the_autodiff_one(
     scene = pj.presets.stella2023(model, n_sections=2, loads=loads, quadrature_points=4)
     scene = static_load_sites(scene)
     u = jnp.asarray(np.random.default_rng(3).uniform(0.0, 0.01, scene.n_tendons))
-    problem = _Scaled.build(scene, u)
+    problem = ScaledProblem.build(scene, u)
     assert (problem.dead_scene is None) == isinstance(model, pj.PolynomialCurvature)
     rng = np.random.default_rng(5)
     for scale in (0.3, 3.0):
@@ -818,13 +819,13 @@ def test_follower_force_jacobian_as_dead_force_plus_turning_is_the_autodiff_one(
 )
 def test_plane_frame_derivatives_are_the_autodiff_ones(model):
     """PCC/PAC knot frames differentiated point by point along the bending and plane angles
-    (:func:`pacjax._kinematics.segment_knot_jacobian`, :func:`segment_knot_curvature`) equal
+    (:func:`pacjax._model.kinematics.segment_knot_jacobian`, :func:`segment_knot_curvature`) equal
     ``jax.jacfwd`` and ``jax.hessian`` of the frames: straight, at 1e-9 rad (where ``phi`` is
     nearly undefined), and bent by several rad; with and without the weighted tangent
     integral; with an empty padding interval at the end."""
     import jax.tree_util as jtu
 
-    from pacjax._kinematics import (
+    from pacjax._model.kinematics import (
         _INTERVAL_NODES,
         segment_knot_curvature,
         segment_knot_frames,
@@ -877,10 +878,10 @@ def test_plane_frame_derivatives_are_the_autodiff_ones(model):
 )
 def test_structured_hessian_with_written_out_tendon_chords_is_the_autodiff_one(model):
     """On the paper's robot every tendon chord lies in one segment, and the solver's Hessian
-    takes the chords' derivatives written out (``pacjax._tendons.tendon_parts_derivatives``)
+    takes the chords' derivatives written out (``pacjax._model.tendons.tendon_parts_derivatives``)
     instead of differentiating through them: it must equal ``jax.hessian`` of the potential
     energy to round-off, straight, moderately and strongly bent, with the tendons taut."""
-    from pacjax._hessian import energy_derivatives
+    from pacjax._model.hessian import energy_derivatives
 
     scene = pj.presets.stella2023(model, tip_mass=0.2)
     assert scene._energy_plan().chords is not None

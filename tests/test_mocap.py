@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import pacjax as pj
-from pacjax.mocapfile import (
+from pacjax.io.mocapfile import (
     load_mocap,
     matrix_to_quaternion,
     motive_dataset,
@@ -230,7 +230,7 @@ def test_static_frames_settle_criterion():
 def test_frames_that_did_not_converge_are_not_in_the_errors():
     """A failed equilibrium has no prediction: the frame is listed as not converged, its errors
     are NaN and the RMSE is that of the other frames."""
-    from pacjax._fitreport import FitErrors
+    from pacjax._identify.report import FitErrors
 
     measured = np.zeros((3, 2, 3))
     predicted = measured.copy()

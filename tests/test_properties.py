@@ -23,7 +23,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import pacjax as pj
-from pacjax._equilibrium import static_load_sites
+from pacjax._model.inputs import static_load_sites
 
 TOL = 1e-10  # the solver's default
 GUIDES = (0.0, 0.5, 1.0)

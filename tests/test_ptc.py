@@ -7,9 +7,9 @@ import numpy as np
 import optimistix as optx
 
 import pacjax as pj
-from pacjax._equilibrium import static_load_sites
-from pacjax._ptc import PseudoTransientContinuation
-from pacjax._solution import STALLED
+from pacjax._model.inputs import static_load_sites
+from pacjax._statics.ptc import PseudoTransientContinuation
+from pacjax._statics.solution import STALLED
 
 
 def test_no_descent_at_the_smallest_step_is_reported_stalled_early():
@@ -85,7 +85,7 @@ def test_follower_rows_of_the_paper_robot_converge_in_few_steps():
     # eigenvalue -0.0099, tip at (-0.6, -12.1, -379.8) mm), an attractor of the flow that each
     # escape led back to, which held the row to the 300-step limit; with the frozen-work merit
     # it stopped there, reported unstable (13, 11 and 15 steps). Since steps move the bending
-    # vector (:meth:`pacjax._equilibrium._Scaled.moved`) and dt may grow 100x a step, the
+    # vector (:meth:`pacjax._statics.problem.ScaledProblem.moved`) and dt may grow 100x a step, the
     # straight start reaches a stable equilibrium (eigenvalue 0.068, tip (18.8, -5.7, -378.9)
     # mm), and so does a start at that indefinite point, by its escape (10, 10, 15 and 22
     # steps).

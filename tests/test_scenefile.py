@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 import pacjax as pj
-from pacjax import scenefile
-from pacjax.scenefile import load_scene, save_scene, scene_from_toml, scene_to_toml
+from pacjax.io import scenefile
+from pacjax.io.scenefile import load_scene, save_scene, scene_from_toml, scene_to_toml
 
 SCENES = pathlib.Path(__file__).resolve().parent.parent / "experiments" / "scenes"
 EXAMPLES = sorted(SCENES.glob("*.toml"))

@@ -6,15 +6,15 @@ import numpy as np
 import pytest
 
 import pacjax as pj
-from pacjax._equilibrium import _Scaled
-from pacjax.bench import random_commands
+from pacjax._statics.problem import ScaledProblem
+from pacjax.cli.bench import random_commands
 
 ANGLES = np.asarray(pj.presets.TENDON_ANGLES)
 
 
 def _aligned(scene, controls, q0=None, tol=1e-10):
     """The start the solver takes from ``q0`` (default straight), per segment."""
-    problem = _Scaled.build(scene, jnp.asarray(controls, float))
+    problem = ScaledProblem.build(scene, jnp.asarray(controls, float))
     q0 = scene.zeros() if q0 is None else jnp.asarray(q0, float)
     y = problem.aligned(q0 / problem.sigma, tol)
     return np.asarray(problem.q(y)).reshape(scene.n_segments, scene.dofs_per_segment)
@@ -121,7 +121,7 @@ def test_aligned_start_reaches_the_same_equilibria_in_fewer_steps(model):
 def test_simulation_start_turns_straight_segments_at_rest_only():
     import jax
 
-    from pacjax.dynamics import _aligned_rest_start
+    from pacjax._dynamics.simulate import _aligned_rest_start
 
     scene = pj.presets.stella2023(pj.PAC(), tip_mass=0.2)
     u = jnp.asarray(_pull(0, 0) + _pull(2, 1))
@@ -151,7 +151,7 @@ def test_a_step_moves_the_bending_vector_along_a_line(model):
     # quarter turn (a bend through straight goes on with theta < 0); a segment whose end is
     # not turned, and dL, move as y + dy; the move is y + dy to first order.
     scene = pj.presets.stella2023(model, tip_mass=0.2)
-    problem = _Scaled.build(scene, jnp.asarray(_pull(1, 0), float))
+    problem = ScaledProblem.build(scene, jnp.asarray(_pull(1, 0), float))
     n, d, k = scene.n_segments, scene.dofs_per_segment, model.free_plane_angle()
     beta = np.asarray(model.plane_angle_basis(jnp.ones(())))
     rng = np.random.default_rng(4)
@@ -199,7 +199,7 @@ def test_a_step_moves_the_bending_vector_along_a_line(model):
 def test_other_models_step_to_y_plus_dy():
     for model in (pj.PAC(frame="paper"), pj.PolynomialCurvature(1)):
         scene = pj.presets.stella2023(model, tip_mass=0.2)
-        problem = _Scaled.build(scene, jnp.asarray(_pull(1, 0), float))
+        problem = ScaledProblem.build(scene, jnp.asarray(_pull(1, 0), float))
         y, dy = np.random.default_rng(1).normal(size=(2, scene.n_dofs))
         np.testing.assert_array_equal(problem.moved(jnp.asarray(y), jnp.asarray(dy)), y + dy)
 
@@ -208,7 +208,7 @@ def test_the_bending_vector_step_reaches_the_same_equilibria_in_fewer_steps(monk
     scene = pj.presets.stella2023(pj.PAC(), tip_mass=0.2)
     commands = random_commands(32, seed=5)
     curved = pj.solve_batch(scene, commands, fallback=False)
-    monkeypatch.setattr(_Scaled, "moved", lambda self, y, dy: y + dy)
+    monkeypatch.setattr(ScaledProblem, "moved", lambda self, y, dy: y + dy)
     jax.clear_caches()  # the compiled solver has the method traced in
     straight = pj.solve_batch(scene, commands, fallback=False)
     monkeypatch.undo()

@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 import pacjax as pj
-import pacjax._batch as batch_module
-import pacjax._equilibrium as equilibrium_module
+import pacjax._statics.batch as batch_module
+import pacjax._statics.equilibrium as equilibrium_module
 
 NAN, INF = math.nan, math.inf
 

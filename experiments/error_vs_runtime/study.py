@@ -41,7 +41,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import pacjax as pj
-from pacjax.bench import machine_info, random_commands, timed
+from pacjax.cli.bench import machine_info, random_commands, timed
 
 HERE = Path(__file__).parent
 TIP_MASSES = (0.0, 0.2, 0.4)  # kg

@@ -11,7 +11,7 @@ Launch one process per host (the same command on each, only ``--process-id`` dif
 
 Every process draws the same commands (same sampler and seed), keeps the contiguous block of rows
 ``np.array_split(range(n), process_count)[process_index]`` and solves it with
-:func:`pacjax.batchrun.run_batch` (:func:`pacjax.iter_batch` chunk by chunk, sharded over the
+:func:`pacjax.cli.batchrun.run_batch` (:func:`pacjax.iter_batch` chunk by chunk, sharded over the
 process's local devices), writing ``parts/<name>_part<k>.h5`` with the attribute ``first_row``.
 No data moves between hosts; ``jax.distributed`` only names the processes. To try it on one
 machine, run both commands with ``--coordinator localhost:12345`` in two shells.
@@ -44,8 +44,8 @@ def main():
     )
     import numpy as np
 
-    from pacjax import batchrun
-    from pacjax.scenefile import load_scene
+    from pacjax.cli import batchrun
+    from pacjax.io.scenefile import load_scene
 
     scene, _, extra = load_scene(args.scene)
     low, high = batchrun.default_ranges(scene)

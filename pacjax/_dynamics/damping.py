@@ -1,0 +1,91 @@
+"""Rayleigh damping of the body and derivative gains of the tendon motors (:class:`Damping`)."""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float
+
+from .._model.inertia import mass_matrix
+from .._model.inputs import solver_dtype
+from .._model.robot import as_float, check_positive
+from .._model.scene import Scene
+
+#: Damping ratio of the lowest mode of the straight body under the default damping.
+DEFAULT_DAMPING_RATIO = 0.05
+
+
+class Damping(eqx.Module):
+    """Rayleigh damping of the body and derivative gains of the tendon motors.
+
+    ``D(q) = mass * M(q) + stiffness * K(q)``, ``K(q) = J(q)^T K_s J(q)`` the section stiffness
+    ``K_s`` pulled back by the strain Jacobian ``J`` (the damping of a Kelvin-Voigt material,
+    :func:`pacjax._model.energy.segment_strain_rate_energy`). At the straight rest configuration it
+    is ``K_0``, the Hessian of the elastic energy. It damps every motion that strains the
+    material, whatever the coordinates: a constant ``K_0`` left the bending-plane angle of a
+    bent PCC/PAC segment (a swing across its bending plane) undamped, since that angle has no
+    strain at ``q = 0``.
+
+    Args:
+        mass: ``alpha`` (1/s), mass-proportional coefficient.
+        stiffness: ``beta`` (s), stiffness-proportional coefficient (damping ratio
+            ``beta omega / 2`` for a mode of angular frequency ``omega``).
+        tendon: ``kappa_D`` (N s/m) of the motors, one per tendon or one for all; None:
+            ``beta kappa_P`` (the tendon springs damped like the body).
+
+    ``Damping()`` is no damping at all (energy is conserved); :meth:`modal` picks ``beta`` for
+    a damping ratio.
+    """
+
+    mass: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    stiffness: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    tendon: Float[Array, "*m"] | None = None
+
+    def __init__(self, mass=0.0, stiffness=0.0, tendon=None):
+        self.mass = mass
+        self.stiffness = stiffness
+        self.tendon = None if tendon is None else as_float(tendon)
+
+    def __check_init__(self):
+        for name in ("mass", "stiffness"):
+            value = getattr(self, name)
+            if jnp.shape(value) != ():
+                raise ValueError(f"Damping.{name} must be a single number, got {jnp.shape(value)}")
+            check_positive(f"Damping.{name}", value, allow_zero=True)
+        if self.tendon is not None:
+            if jnp.ndim(self.tendon) > 1:
+                raise ValueError("Damping.tendon must be a number or one number per tendon")
+            check_positive("Damping.tendon", self.tendon, allow_zero=True)
+
+    @classmethod
+    def modal(cls, scene: Scene, ratio: float = DEFAULT_DAMPING_RATIO, **kwargs) -> "Damping":
+        """Stiffness-proportional damping with damping ratio ``ratio`` on the lowest mode of
+        the straight robot at rest (elasticity and inertia only)."""
+        if not (np.isfinite(ratio) and ratio >= 0):
+            raise ValueError(f"ratio must be a finite number >= 0, got {ratio}")
+        dtype = solver_dtype(scene)
+        omega = jnp.sqrt(jnp.min(_rest_eigenvalues(scene, dtype)))
+        return cls(stiffness=2.0 * ratio / omega, **kwargs)
+
+    def tendon_gains(self, scene: Scene, dtype) -> Float[Array, " m"]:
+        """``kappa_D`` (N s/m) per tendon (tension-mode tendons ignore theirs)."""
+        if self.tendon is not None:
+            return jnp.broadcast_to(self.tendon.astype(dtype), (scene.n_tendons,))
+        gains = [t.gain if t.mode == "length" else jnp.zeros(()) for t in scene.tendons]
+        return self.stiffness.astype(dtype) * jnp.stack(gains).astype(dtype)
+
+
+@eqx.filter_jit
+def _rest_eigenvalues(scene: Scene, dtype):
+    q = scene.zeros(dtype)
+    stiffness = jax.hessian(scene.elastic_energy)(q)
+    return generalised_eigenvalues(stiffness, mass_matrix(scene, q))
+
+
+def generalised_eigenvalues(stiffness, mass):
+    """Eigenvalues of ``M^-1 K`` for symmetric ``K`` and positive definite ``M``."""
+    chol = jnp.linalg.cholesky(mass)
+    inv = jax.scipy.linalg.solve_triangular(
+        chol, jnp.eye(mass.shape[0], dtype=mass.dtype), lower=True
+    )
+    return jnp.linalg.eigvalsh(inv @ (0.5 * (stiffness + stiffness.T)) @ inv.T)

@@ -1,0 +1,1 @@
+"""Identification: motion-capture datasets, the fitting problem, the fit and its report."""

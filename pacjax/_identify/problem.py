@@ -1,0 +1,386 @@
+"""The fitting problem of :func:`pacjax.identify`: parameter blocks, residuals and their
+implicit-function-theorem Jacobians, and the warm-started batch evaluation of a dataset.
+
+A :class:`Problem` holds the scene (with the dataset's per-frame loads), the fitted parameter
+blocks and their starting values; ``Problem.apply(theta)`` puts internal coordinates into the
+scene. Positive parameters are ``start * exp(theta)`` (positivity by reparametrisation), the
+others ``start + scale * theta``. Equal structure means no recompilation across fits.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+
+from .._model.frameloads import FrameLoads
+from .._model.robot import ExponentialStiffening
+from .._model.rotation import exp_so3, matvec3
+from .._model.scene import Scene
+from .._statics.batch import solve_batch
+from .dataset import MocapDataset
+
+PARAMETERS = {
+    "bending_stiffness": ("segment", "N m^2", True),
+    "axial_stiffness": ("segment", "N/m", True),
+    "torsion_stiffness": ("segment", "N m^2", True),
+    "linear_density": ("segment", "kg/m", True),
+    "stiffening": ("segment", "1", False),
+    "tendon_gain": ("tendon", "N/m", True),
+    "tendon_offset": ("tendon", "m", True),
+    "mocap_transform": ("transform", "rad | m", False),
+    "marker_offsets": ("marker", "m", False),
+}
+#: Huber threshold that makes the loss quadratic (squares stay finite in float64).
+L2_DELTA = 1e150
+STEP_SCALE = {"stiffening": 1.0, "mocap_transform": 1.0, "marker_offsets": 0.01}
+
+
+class Block(eqx.Module):
+    """One fitted parameter group (static description)."""
+
+    name: str = eqx.field(static=True)
+    size: int = eqx.field(static=True)  # internal coordinates
+    targets: tuple = eqx.field(static=True)  # segment / tendon / marker indices written
+    log: bool = eqx.field(static=True)
+
+
+class Problem(eqx.Module):
+    """Everything the compiled residual needs; equal structure means no recompilation."""
+
+    scene: Scene
+    frame_loads: FrameLoads = eqx.field(static=True)
+    blocks: tuple = eqx.field(static=True)
+    initial: tuple  # physical starting values per block (arrays)
+    rotation0: jax.Array
+    translation0: jax.Array
+    site_segment: tuple = eqx.field(static=True)
+    site_s: tuple = eqx.field(static=True)
+    offsets: jax.Array  # (m, 3) starting marker stand-offs
+    noise: jax.Array
+    orientation_noise: jax.Array
+    huber_delta: jax.Array
+
+    @property
+    def n_theta(self) -> int:
+        return sum(b.size for b in self.blocks)
+
+    def split(self, theta):
+        out, k = [], 0
+        for b in self.blocks:
+            out.append(theta[k : k + b.size])
+            k += b.size
+        return out
+
+    def physical(self, block: Block, init, th):
+        if block.name == "mocap_transform":
+            return th
+        if block.name == "marker_offsets":
+            return init + STEP_SCALE["marker_offsets"] * th.reshape(init.shape)
+        if block.log:
+            return init * jnp.exp(th)  # th broadcasts when shared
+        return init + STEP_SCALE.get(block.name, 1.0) * th
+
+    def apply(self, theta):
+        """``(scene, rotation, translation, offsets)`` at internal coordinates ``theta``."""
+        scene, rot, trans, offsets = self.scene, self.rotation0, self.translation0, self.offsets
+        for block, init, th in zip(self.blocks, self.initial, self.split(theta), strict=True):
+            value = self.physical(block, init, th)
+            if block.name == "mocap_transform":
+                rot = exp_so3(value[:3]) @ self.rotation0
+                trans = self.translation0 + value[3:]
+            elif block.name == "marker_offsets":
+                offsets = value
+            else:
+                scene = _put(scene, block, value)
+        return scene, rot, trans, offsets
+
+
+def _put(scene: Scene, block: Block, value) -> Scene:
+    idx = block.targets
+    name = block.name
+    if name == "stiffening":
+        where = lambda s: [s.robot.segments[i].stiffening.rate for i in idx]  # noqa: E731
+    elif PARAMETERS[name][0] == "segment":
+        where = lambda s: [getattr(s.robot.segments[i], name) for i in idx]  # noqa: E731
+    elif name == "tendon_gain":
+        where = lambda s: [s.tendons[i].gain for i in idx]  # noqa: E731
+    else:  # tendon_offset: the offset, and a tapered route's end offset in proportion
+        ends = [i for i in idx if scene.tendons[i].offset_end is not None]
+        ratio = {i: scene.tendons[i].offset_end / scene.tendons[i].offset for i in ends}
+        scene = eqx.tree_at(
+            lambda s: [s.tendons[i].offset_end for i in ends],
+            scene,
+            [value[idx.index(i)] * ratio[i] for i in ends],
+        )
+        where = lambda s: [s.tendons[i].offset for i in idx]  # noqa: E731
+    return eqx.tree_at(where, scene, [value[k] for k in range(len(idx))])
+
+
+def _frame_residual(problem: Problem, theta, q, controls, row, meas, mask, rmeas, rmask):
+    """Scaled residuals of one frame (robust weights applied), marker predictions (mocap
+    frame) and rotations at the sites."""
+    scene, rot, trans, offsets = problem.apply(theta)
+    if row is not None:
+        scene = problem.frame_loads(scene, row)
+    frames_rot, frames_pos = scene.frames(
+        q, np.asarray(problem.site_segment), jnp.asarray(problem.site_s, q.dtype)
+    )
+    world = frames_pos + matvec3(frames_rot, offsets)
+    pred = world @ rot.T + trans
+    d = (pred - meas) / problem.noise * mask[:, None]
+    # Huber weights on each marker's distance (the quadratic loss is the threshold at
+    # L2_DELTA: one compiled residual serves both losses).
+    e2 = jnp.sum(d * d, -1)
+    big = e2 > problem.huber_delta**2
+    e = jnp.sqrt(jnp.where(big, e2, 1.0))
+    w = jnp.where(big, jnp.sqrt(2.0 * optax.huber_loss(e, delta=problem.huber_delta)) / e, 1.0)
+    d = d * w[:, None]
+    parts = [d.reshape(-1)]
+    rpred = jnp.einsum("ij,mjk->mik", rot, frames_rot)
+    if rmeas is not None:
+        rel = jnp.einsum("mji,mjk->mik", rpred, rmeas)
+        skew = 0.5 * (rel - jnp.swapaxes(rel, -1, -2))
+        v = jnp.stack([skew[:, 2, 1], skew[:, 0, 2], skew[:, 1, 0]], -1)
+        parts.append((v / problem.orientation_noise * rmask[:, None]).reshape(-1))
+    return jnp.concatenate(parts), pred, rpred
+
+
+def _frame_jacobian(problem, theta, q, controls, row, meas, mask, rmeas, rmask):
+    """Residuals and their total derivative by the implicit function theorem."""
+
+    def equilibrium_residual(th, q_):
+        scene = problem.apply(th)[0]
+        if row is not None:
+            scene = problem.frame_loads(scene, row)
+        return scene.residual(q_, controls)
+
+    def residual(th, q_):
+        return _frame_residual(problem, th, q_, controls, row, meas, mask, rmeas, rmask)
+
+    r, pred, rpred = residual(theta, q)
+    d_theta = jax.jacfwd(lambda th: residual(th, q)[0])(theta)
+    d_q = jax.jacfwd(lambda q_: residual(theta, q_)[0])(q)
+    stiffness = jax.jacfwd(equilibrium_residual, 1)(theta, q)
+    forcing = jax.jacfwd(equilibrium_residual, 0)(theta, q)
+    dq = -jnp.linalg.solve(stiffness, forcing)  # implicit function theorem
+    return r, d_theta + d_q @ dq, pred, rpred
+
+
+@eqx.filter_jit
+def _evaluate(problem, theta, q, controls, rows, meas, mask, rmeas, rmask):
+    axes = (None, None, 0, 0, 0 if rows is not None else None, 0, 0)
+    axes += (0 if rmeas is not None else None, 0 if rmask is not None else None)
+    return jax.vmap(_frame_jacobian, in_axes=axes)(
+        problem, theta, q, controls, rows, meas, mask, rmeas, rmask
+    )
+
+
+# ------------------------------------------------------------------------------ set-up
+def make_blocks(scene: Scene, params, per_segment, n_markers) -> tuple[Scene, list, list, list]:
+    """Blocks, starting values and labels; adds zero stiffening laws where they are fitted."""
+    if isinstance(params, str):
+        params = (params,)
+    params = tuple(params)
+    if not params:
+        raise ValueError("params is empty: name at least one parameter to fit")
+    for name in params + tuple(per_segment):
+        if name not in PARAMETERS:
+            raise ValueError(f"unknown parameter {name!r}; known: {', '.join(PARAMETERS)}")
+    if len(set(params)) != len(params):
+        raise ValueError(f"params lists a parameter twice: {params}")
+    for name in per_segment:
+        if name not in params:
+            raise ValueError(f"per_segment names {name!r}, which is not in params")
+        if PARAMETERS[name][0] not in ("segment", "tendon"):
+            raise ValueError(f"per_segment applies to segment and tendon parameters, not {name!r}")
+    if "stiffening" in params:
+        segments = [
+            seg
+            if seg.stiffening is not None
+            else dataclasses.replace(seg, stiffening=ExponentialStiffening(0.0))
+            for seg in scene.robot.segments
+        ]
+        if not all(isinstance(seg.stiffening, ExponentialStiffening) for seg in segments):
+            raise ValueError("stiffening can be fitted for ExponentialStiffening laws only")
+        scene = eqx.tree_at(lambda s: s.robot.segments, scene, tuple(segments))
+    blocks, initial, labels = [], [], []
+    for name in params:
+        kind, unit, positive = PARAMETERS[name]
+        per = name in per_segment
+        if kind == "segment":
+            idx = tuple(range(scene.n_segments))
+            if name == "stiffening":
+                values = [float(seg.stiffening.rate) for seg in scene.robot.segments]
+            else:
+                values = [float(getattr(seg, name)) for seg in scene.robot.segments]
+            label = [f"[{i}]" for i in idx]
+        elif kind == "tendon":
+            idx = tuple(
+                i
+                for i, t in enumerate(scene.tendons)
+                if name != "tendon_gain" or t.mode == "length"
+            )
+            if not idx:
+                raise ValueError(
+                    f"{name}: the scene has no "
+                    + (
+                        "length-mode tendon (tension-mode tendons have no gain)"
+                        if scene.tendons and name == "tendon_gain"
+                        else "tendon"
+                    )
+                )
+            attr = "gain" if name == "tendon_gain" else "offset"
+            values = [float(getattr(scene.tendons[i], attr)) for i in idx]
+            label = [f"[{i}]" for i in idx]
+        elif kind == "transform":
+            idx, values = (), [0.0] * 6
+            label = ["[rx]", "[ry]", "[rz]", "[tx]", "[ty]", "[tz]"]
+        else:
+            idx, values = tuple(range(n_markers)), None
+            label = [f"[{j}].{a}" for j in range(n_markers) for a in "xyz"]
+        if positive and any(v <= 0 for v in values):
+            raise ValueError(
+                f"{name}: the starting value must be > 0 to fit it (log scale), got {values}"
+            )
+        if kind in ("segment", "tendon"):
+            size = len(idx) if per else 1
+        elif kind == "transform":
+            size = 6
+        else:
+            size = 3 * n_markers
+        blocks.append(Block(name, size, idx, positive))
+        initial.append(None if values is None else np.asarray(values, float))
+        labels.append(
+            label
+            if (per or kind not in ("segment", "tendon"))
+            else ([""] if len(set(values)) == 1 else label)
+        )
+    return scene, blocks, initial, labels
+
+
+def kabsch(world: np.ndarray, measured: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Rotation and translation with ``measured ~ R world + t`` (observed points only)."""
+    ok = np.isfinite(measured).all(-1)
+    a, b = world[ok], measured[ok]
+    ca, cb = a.mean(0), b.mean(0)
+    u, _, vt = np.linalg.svd((a - ca).T @ (b - cb))
+    d = np.sign(np.linalg.det(vt.T @ u.T))
+    r = vt.T @ np.diag([1.0, 1.0, d]) @ u.T
+    return r, cb - r @ ca
+
+
+@dataclasses.dataclass
+class FrameData:
+    """A dataset padded to whole chunks, as arrays for the compiled evaluation."""
+
+    n: int
+    controls: np.ndarray
+    rows: dict | None
+    meas: np.ndarray
+    mask: np.ndarray
+    rmeas: np.ndarray | None
+    rmask: np.ndarray | None
+    q: np.ndarray | None = None  # warm starts
+
+    @staticmethod
+    def build(dataset: MocapDataset, frame_loads: FrameLoads, chunk: int, orient: bool):
+        n = dataset.n_frames
+        total = -(-n // chunk) * chunk
+
+        def pad(x):
+            return None if x is None else np.concatenate([x, np.repeat(x[-1:], total - n, 0)])
+
+        mask = dataset.observed.astype(float)
+        mask = np.concatenate([mask, np.zeros((total - n,) + mask.shape[1:])])
+        meas = pad(np.nan_to_num(dataset.markers))
+        rows = frame_loads.rows(dataset)
+        rows = None if rows is None else {k: pad(v) for k, v in rows.items()}
+        rmeas = rmask = None
+        if orient:
+            ori = dataset.orientations
+            ok = np.isfinite(ori.reshape(n, dataset.n_markers, 9)).all(-1)
+            rmask = np.concatenate([ok.astype(float), np.zeros((total - n, ok.shape[1]))])
+            rmeas = pad(np.where(ok[..., None, None], ori, np.eye(3)))
+        return FrameData(n, pad(dataset.controls), rows, meas, mask, rmeas, rmask)
+
+
+class Evaluator:
+    """Batch equilibria (warm-started) and residual Jacobians of one dataset."""
+
+    def __init__(self, problem, data: FrameData, chunk: int, solver_options: dict):
+        self.problem, self.data, self.chunk, self.options = problem, data, chunk, solver_options
+        self.count = 0
+
+    def _solve(self, scene, q0):
+        d = self.data
+        eq = solve_batch(
+            scene,
+            d.controls,
+            q0=q0,
+            params=d.rows,
+            update=self.problem.frame_loads if d.rows is not None else None,
+            chunk_size=self.chunk,
+            progress=False,
+            **self.options,
+        )
+        q = np.array(eq.q)
+        return q, np.asarray(eq.converged) & np.asarray(eq.stable) & np.all(np.isfinite(q), 1)
+
+    def __call__(self, theta, q0=None):
+        p, d = self.problem, self.data
+        scene = p.apply(jnp.asarray(theta))[0]
+        q, ok = self._solve(scene, q0)
+        if q0 is not None and not ok.all():
+            # A warm start next to an equilibrium can stall at round-off (the energy cannot
+            # decrease further); those rows start again from the straight configuration (the
+            # same batch shape: no recompilation).
+            q_retry, ok_retry = self._solve(scene, np.where(ok[:, None], q, 0.0))
+            better = ok_retry & ~ok
+            q[better], ok = q_retry[better], ok | ok_retry
+        q_safe = np.where(ok[:, None], q, 0.0)
+        rs, js, preds, rpreds = [], [], [], []
+        for start in range(0, len(q), self.chunk):
+            sl = slice(start, start + self.chunk)
+            pick = lambda x, sl=sl: None if x is None else jnp.asarray(x[sl])  # noqa: E731
+            rows = None if d.rows is None else {k: jnp.asarray(v[sl]) for k, v in d.rows.items()}
+            r, j, pred, rpred = _evaluate(
+                p,
+                jnp.asarray(theta),
+                pick(q_safe),
+                pick(d.controls),
+                rows,
+                pick(d.meas),
+                pick(d.mask),
+                pick(d.rmeas),
+                pick(d.rmask),
+            )
+            rs.append(np.asarray(r))
+            js.append(np.asarray(j))
+            preds.append(np.asarray(pred))
+            rpreds.append(np.asarray(rpred))
+        self.count += 1
+        valid = ok.copy()
+        valid[d.n :] = False
+        r = np.concatenate(rs) * valid[:, None]
+        j = np.concatenate(js) * valid[:, None, None]
+        pred, rpred = np.concatenate(preds)[: d.n], np.concatenate(rpreds)[: d.n]
+        return Evaluation(r, j, pred, rpred, q, valid)
+
+
+@dataclasses.dataclass
+class Evaluation:
+    r: np.ndarray  # (frames, k)
+    j: np.ndarray  # (frames, k, p)
+    pred: np.ndarray
+    rpred: np.ndarray
+    q: np.ndarray
+    valid: np.ndarray
+
+    def cost(self, valid=None) -> float:
+        v = self.valid if valid is None else valid
+        return 0.5 * float(np.sum(self.r[v] ** 2))

@@ -1,0 +1,311 @@
+"""Synthetic motion-capture data from a higher-fidelity version of a scene.
+
+The honest stand-in for real logs: the data come from a richer model than the one being fitted
+(cubic curvature per segment, optionally each segment split into several, stiffening with
+contraction), seen through an unknown rigid transform (the mocap frame is not the robot's world
+frame), with Gaussian marker noise and dropped markers.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import warnings
+
+import numpy as np
+
+from .._model.frameloads import with_frame_loads
+from .._model.loads import Gravity, PointForce, PointMass, PointMoment
+from .._model.robot import ExponentialStiffening, Robot, Segment
+from .._model.scene import Scene, normalise_sites
+from .._model.strain import PolynomialCurvature, StrainModel
+from .._model.tendons import Tendon
+from .._statics.batch import solve_batch
+from .dataset import MocapDataset
+
+
+def _piece(site_seg: int, s: float, n: int, anchor: bool = False) -> tuple[int, float]:
+    """A site ``(segment, s)`` of the coarse robot on the robot with ``n`` pieces a segment."""
+    j = min(int(np.floor(s * n)), n - 1)
+    local = s * n - j
+    if anchor and local == 0.0 and j > 0:  # an anchor needs s in (0, 1]
+        j, local = j - 1, 1.0
+    return site_seg * n + j, float(local)
+
+
+def high_fidelity(
+    scene: Scene,
+    *,
+    model: StrainModel | None = None,
+    subdivisions: int = 1,
+    stiffening_rate: float | None = None,
+) -> Scene:
+    """A richer version of ``scene`` with the same physical parameters.
+
+    Args:
+        scene: the scene.
+        model: strain model of the result (default ``PolynomialCurvature(order=3)``).
+        subdivisions: split every segment into this many equal pieces (same ``EI``, ``GJ``,
+            density; axial stiffness times ``subdivisions``: springs in series). Only for robots
+            without Bowden tendons (a Bowden cable enters at its own segment's base).
+        stiffening_rate: add :class:`ExponentialStiffening` with this rate to segments without
+            a stiffening law.
+    """
+    model = PolynomialCurvature(order=3) if model is None else model
+    n = int(subdivisions)
+    if n < 1:
+        raise ValueError(f"subdivisions must be >= 1, got {subdivisions}")
+    if n > 1 and any(t.bowden for t in scene.tendons):
+        raise ValueError(
+            "subdivisions > 1 is not possible with Bowden tendons (a Bowden tendon enters at the "
+            "base of its own segment); use subdivisions=1 and a higher-order model"
+        )
+    segments = []
+    for seg in scene.robot.segments:
+        law = seg.stiffening
+        if law is None and stiffening_rate is not None:
+            law = ExponentialStiffening(stiffening_rate)
+        for j in range(n):
+            tapered = seg.radius_tip is not None
+            segments.append(
+                Segment(
+                    length=seg.length / n,
+                    bending_stiffness=seg.bending_stiffness
+                    * (seg.section_scale(np.asarray(j / n)) ** 4 if tapered else 1.0),
+                    axial_stiffness=seg.axial_stiffness * n,
+                    torsion_stiffness=seg.torsion_stiffness
+                    * (seg.section_scale(np.asarray(j / n)) ** 4 if tapered else 1.0),
+                    linear_density=seg.linear_density
+                    * (seg.section_scale(np.asarray(j / n)) ** 2 if tapered else 1.0),
+                    radius=seg.radius_at(np.asarray(j / n)),
+                    radius_tip=seg.radius_at(np.asarray((j + 1) / n)) if tapered else None,
+                    stiffening=law,
+                    contraction_limit=seg.contraction_limit / n,
+                )
+            )
+    robot = Robot(segments, scene.robot.base_rotation, scene.robot.base_position)
+    tendons = []
+    for t in scene.tendons:
+        seg, s = _piece(t.segment, t.s, n, anchor=True)
+        guides = sorted(
+            {round(g * n - j, 12) for g in t.guides for j in range(n) if j <= g * n <= j + 1}
+        )
+        tendons.append(
+            Tendon(
+                seg,
+                t.angle,
+                t.offset,
+                s=s,
+                offset_end=t.offset_end,
+                bowden=t.bowden,
+                guides=guides,
+                mode=t.mode,
+                gain=t.gain,
+            )
+        )
+    loads = []
+    for load in scene.loads:
+        if isinstance(load, Gravity):
+            loads.append(load)
+            continue
+        seg, s = _piece(load.segment, float(load.s), n)
+        if isinstance(load, PointMass):
+            loads.append(PointMass(load.mass, seg, s))
+        elif isinstance(load, PointForce):
+            loads.append(PointForce(load.force, seg, s, follower=load.follower))
+        elif isinstance(load, PointMoment):
+            loads.append(PointMoment(load.moment, seg, s, follower=load.follower))
+    markers = [(*_piece(seg, s, n), off) for seg, s, off in scene.markers]
+    quad = max(scene.quadrature_points, model.strain_degree() + 3)
+    return Scene(
+        robot, model, tendons=tendons, loads=loads, markers=markers, quadrature_points=quad
+    )
+
+
+@dataclasses.dataclass
+class SyntheticTruth:
+    """What produced a synthetic dataset.
+
+    Attributes:
+        scene: the scene that generated the data (the high-fidelity one).
+        q: (frames, n_dofs) its equilibria.
+        markers: (frames, m, 3) noise-free marker positions in the scene's world frame (m).
+        rotation, translation: the transform ``x_mocap = rotation @ x_world + translation``.
+        dropped: indices (into the requested controls) of frames whose truth did not converge
+            to a stable equilibrium and were left out.
+    """
+
+    scene: Scene
+    q: np.ndarray
+    markers: np.ndarray
+    rotation: np.ndarray
+    translation: np.ndarray
+    dropped: np.ndarray
+
+
+def random_rotation(rng: np.random.Generator) -> np.ndarray:
+    """A uniformly random rotation matrix."""
+    w, x, y, z = (q := rng.normal(size=4)) / np.linalg.norm(q)
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def synthetic_mocap(
+    scene: Scene,
+    controls,
+    *,
+    sites=None,
+    payload_mass=None,
+    payload_site=None,
+    force=None,
+    force_site=None,
+    force_follower: bool = False,
+    noise: float = 1e-3,
+    dropout: float = 0.0,
+    transform="random",
+    orientations: bool = False,
+    orientation_noise: float = 0.01,
+    exact: bool = False,
+    model: StrainModel | None = None,
+    subdivisions: int = 1,
+    stiffening_rate: float | None = None,
+    seed: int = 0,
+    **solver_options,
+) -> tuple[MocapDataset, SyntheticTruth]:
+    """A synthetic motion-capture dataset of ``scene`` (the ground truth's parameters).
+
+    Args:
+        scene: the robot with the true parameters.
+        controls: (frames, n_tendons) commands.
+        sites: marker sites (default: the scene's markers).
+        payload_mass, payload_site, force, force_site, force_follower: per-frame loads, as in
+            :meth:`MocapDataset.from_arrays`.
+        noise: standard deviation (m) of the Gaussian noise on each marker coordinate.
+        dropout: probability that a marker is missing in a frame (NaN).
+        transform: ``"random"`` (uniform random rotation, translation within 1 m), None
+            (identity: mocap frame = world frame), or ``(rotation, translation)``.
+        orientations: also record the rotation at every site (with ``orientation_noise`` rad).
+        exact: generate with ``scene`` itself (the fitted model can match the data exactly);
+            otherwise with :func:`high_fidelity` (``model``, ``subdivisions``,
+            ``stiffening_rate``).
+        seed: random seed.
+        **solver_options: for :func:`pacjax.solve_batch`.
+    """
+    rng = np.random.default_rng(seed)
+    controls = np.asarray(controls, float)
+    if controls.ndim != 2 or controls.shape[1] != scene.n_tendons:
+        raise ValueError(
+            f"controls must have shape (frames, {scene.n_tendons}), got {controls.shape}"
+        )
+    sites = scene.markers if sites is None else normalise_sites(sites, scene.n_segments)
+    if not sites:
+        raise ValueError("no marker sites: pass sites= or give the scene markers")
+    if not (noise >= 0 and 0 <= dropout < 1):
+        raise ValueError("noise must be >= 0 and dropout in [0, 1)")
+    n_frames = controls.shape[0]
+    # A provisional dataset (noise-free placeholders) carries and validates the frame loads.
+    template = MocapDataset.from_arrays(
+        controls,
+        np.zeros((n_frames, len(sites), 3)),
+        sites,
+        payload_mass,
+        payload_site=payload_site,
+        force=force,
+        force_site=force_site,
+        force_follower=force_follower,
+    )
+    truth_scene = _with_markers(scene, sites)
+    if not exact:
+        truth_scene = high_fidelity(
+            truth_scene, model=model, subdivisions=subdivisions, stiffening_rate=stiffening_rate
+        )
+    loaded, frame_loads = with_frame_loads(truth_scene, _remap_sites(template, scene, truth_scene))
+    rows = frame_loads.rows(template)
+    eq = solve_batch(
+        loaded,
+        controls,
+        params=rows,
+        update=frame_loads if rows is not None else None,
+        **{"chunk_size": 16, **solver_options},
+    )
+    ok = np.asarray(eq.converged) & np.asarray(eq.stable)
+    if not ok.any():
+        raise ValueError("no frame of the ground truth converged to a stable equilibrium")
+    if not ok.all():
+        warnings.warn(
+            f"{int((~ok).sum())} synthetic frame(s) did not converge; left out", stacklevel=2
+        )
+    from .._model.query import site_frames
+
+    q = np.asarray(eq.q)[ok]
+    segs = np.asarray([x[0] for x in truth_scene.markers])
+    ss = np.asarray([x[1] for x in truth_scene.markers])
+    offs = np.asarray([x[2] for x in truth_scene.markers])
+    world, rots = [], []
+    for qk in q:
+        pos, rot = site_frames(loaded, qk, segs, ss, offs)
+        world.append(np.asarray(pos))
+        rots.append(np.asarray(rot))
+    world, rots = np.stack(world), np.stack(rots)
+    if transform is None:
+        rotation, translation = np.eye(3), np.zeros(3)
+    elif isinstance(transform, str) and transform == "random":
+        rotation, translation = random_rotation(rng), rng.uniform(-1.0, 1.0, 3)
+    else:
+        rotation, translation = (np.asarray(x, float) for x in transform)
+    measured = world @ rotation.T + translation + noise * rng.normal(size=world.shape)
+    if dropout > 0:
+        miss = rng.random(measured.shape[:2]) < dropout
+        miss[np.arange(len(miss)), rng.integers(0, miss.shape[1], len(miss))] = False
+        measured[miss] = np.nan
+    ori = None
+    if orientations:
+        ori = np.einsum("ij,fmjk->fmik", rotation, rots)
+        if orientation_noise > 0:
+            from .._model.rotation import exp_so3
+
+            kicks = orientation_noise * rng.normal(size=ori.shape[:2] + (3,))
+            ori = np.einsum(
+                "fmij,fmjk->fmik", ori, np.asarray([[exp_so3(w) for w in f] for f in kicks])
+            )
+    keep = np.flatnonzero(ok)
+    dataset = MocapDataset.from_arrays(
+        controls[keep],
+        measured,
+        sites,
+        None if template.payload_mass is None else template.payload_mass[keep],
+        payload_site=template.payload_site,
+        force=None if template.force is None else template.force[keep],
+        force_site=template.force_site,
+        force_follower=force_follower,
+        orientations=ori,
+    )
+    truth = SyntheticTruth(truth_scene, q, world, rotation, translation, np.flatnonzero(~ok))
+    return dataset, truth
+
+
+def _with_markers(scene: Scene, sites) -> Scene:
+    return Scene(
+        scene.robot,
+        scene.model,
+        tendons=scene.tendons,
+        loads=scene.loads,
+        markers=sites,
+        quadrature_points=scene.quadrature_points,
+        rotation_substeps=scene.rotation_substeps,
+    )
+
+
+def _remap_sites(dataset: MocapDataset, coarse: Scene, fine: Scene) -> MocapDataset:
+    """The dataset's payload and force sites on the (possibly subdivided) truth robot."""
+    n = fine.n_segments // coarse.n_segments
+    if n == 1:
+        return dataset
+    last = (coarse.n_segments - 1, 1.0)
+    ps = _piece(*(dataset.payload_site or last), n) if dataset.payload_mass is not None else None
+    fs = _piece(*(dataset.force_site or last), n) if dataset.force is not None else None
+    return dataclasses.replace(dataset, payload_site=ps, force_site=fs)

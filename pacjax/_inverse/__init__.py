@@ -1,0 +1,1 @@
+"""Inverse statics: the command least-squares problem, its solves and their results."""

@@ -1,0 +1,95 @@
+"""Rotations: the hat map, the exponential map of SO(3), and elementary rotations.
+
+The exponential map is written so that its value and its first and second derivatives are exact
+at zero rotation (the straight robot): the kernels ``sin(t)/t`` and ``(1 - cos t)/t^2`` switch
+to their series in ``t^2`` below a small threshold, behind a double ``where`` so that the unused
+branch never produces a NaN gradient.
+"""
+
+import jax.numpy as jnp
+from jaxtyping import Array, Float
+
+# Below this squared angle the kernels use their series (4 terms: truncation error < 1e-18).
+_SERIES_THRESHOLD = 1e-3
+
+
+def hat(v: Float[Array, "3"]) -> Float[Array, "3 3"]:
+    """Skew-symmetric matrix ``[v]x`` with ``[v]x w = v x w``."""
+    x, y, z = v[0], v[1], v[2]
+    zero = jnp.zeros_like(x)
+    return jnp.stack(
+        [
+            jnp.stack([zero, -z, y]),
+            jnp.stack([z, zero, -x]),
+            jnp.stack([-y, x, zero]),
+        ]
+    )
+
+
+def _exp_kernels(theta_sq: Float[Array, ""]) -> tuple[Float[Array, ""], Float[Array, ""]]:
+    """``sin(t)/t`` and ``(1 - cos t)/t^2`` as functions of ``t^2``, smooth at 0."""
+    small = theta_sq < _SERIES_THRESHOLD
+    safe_sq = jnp.where(small, jnp.ones_like(theta_sq), theta_sq)
+    theta = jnp.sqrt(safe_sq)
+    half_sin = jnp.sin(0.5 * theta)
+    sinc = jnp.sin(theta) / theta
+    # 1 - cos t = 2 sin^2(t/2) avoids the cancellation that ruins float32 near 0.
+    cosc = 2.0 * half_sin * half_sin / safe_sq
+    t2 = theta_sq
+    sinc_series = 1.0 - t2 / 6.0 * (1.0 - t2 / 20.0 * (1.0 - t2 / 42.0))
+    cosc_series = 0.5 - t2 / 24.0 * (1.0 - t2 / 30.0 * (1.0 - t2 / 56.0))
+    return jnp.where(small, sinc_series, sinc), jnp.where(small, cosc_series, cosc)
+
+
+def cross3(a, b):
+    # Written out: jnp.cross lowers to slices and concatenations that XLA:CPU fuses poorly.
+    return (
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    )
+
+
+def exp_so3(omega: Float[Array, "3"]) -> Float[Array, "3 3"]:
+    """Rotation matrix ``exp([omega]x)`` (Rodrigues' formula)."""
+    x, y, z = omega[0], omega[1], omega[2]
+    a, b = _exp_kernels(x * x + y * y + z * z)
+    bx, by, bz = b * x, b * y, b * z
+    return jnp.stack(
+        [
+            jnp.stack([1.0 - by * y - bz * z, bx * y - a * z, bx * z + a * y]),
+            jnp.stack([bx * y + a * z, 1.0 - bx * x - bz * z, by * z - a * x]),
+            jnp.stack([bx * z - a * y, by * z + a * x, 1.0 - bx * x - by * y]),
+        ]
+    )
+
+
+def rot_z(angle: Float[Array, ""]) -> Float[Array, "3 3"]:
+    """Rotation by ``angle`` (rad) about the z axis."""
+    c, s = jnp.cos(angle), jnp.sin(angle)
+    zero, one = jnp.zeros_like(c), jnp.ones_like(c)
+    return jnp.stack(
+        [jnp.stack([c, -s, zero]), jnp.stack([s, c, zero]), jnp.stack([zero, zero, one])]
+    )
+
+
+def rotate(omega: Float[Array, "3"], v: Float[Array, "3"]) -> Float[Array, "3"]:
+    """``exp([omega]x) v`` without forming the matrix."""
+    a, b = _exp_kernels(omega[0] ** 2 + omega[1] ** 2 + omega[2] ** 2)
+    w = cross3(omega, v)
+    ww = cross3(omega, w)
+    return jnp.stack([v[k] + a * w[k] + b * ww[k] for k in range(3)])
+
+
+def matmul3(a: Float[Array, "*b 3 3"], b: Float[Array, "*b 3 3"]) -> Float[Array, "*b 3 3"]:
+    """``a @ b`` for stacks of 3x3 matrices.
+
+    (A multiply-and-sum form was tried for XLA:CPU batching; its float32 Hessian crashed XLA
+    with a segmentation fault, so this stays a plain matmul.)
+    """
+    return a @ b
+
+
+def matvec3(a: Float[Array, "*b 3 3"], v: Float[Array, "*b 3"]) -> Float[Array, "*b 3"]:
+    """``a @ v`` for stacks of 3x3 matrices and vectors."""
+    return jnp.einsum("...ij,...j->...i", a, v)

@@ -1,0 +1,511 @@
+"""A scene: the robot, its strain model, tendons and loads, and nothing else.
+
+A term the scene does not contain is never traced: the checks below are Python ``if``s on the
+scene's structure, not zeros multiplied inside a kernel. Array fields (stiffnesses, lengths,
+masses, forces, gains) are traced, so a new parameter value never triggers recompilation;
+indices, counts, routing and the model are static structure.
+"""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float
+
+from .energy import elastic_energy, mass_beyond, moment_cotangent, robot_section_stiffness
+from .energy_plan import EnergyPlan, Indexed
+from .kinematics import (
+    KinematicsConfig,
+    Knots,
+    PointLayout,
+    chain_segments,
+    contract,
+    grid_frames,
+    has_plane_derivatives,
+    jacobian_and_value,
+    knot_frames,
+    local_frame,
+    segment_knot_curvature,
+    segment_knot_frames,
+    segment_knot_jacobian,
+    take_runs,
+)
+from .loads import Gravity, PointForce, PointMass, PointMoment
+from .robot import Robot, concrete, known_sites
+from .rotation import matmul3, matvec3
+from .strain import StrainModel
+from .tendons import Tendon, TendonRouting, segment_tendon_parts, tendon_energy, tendon_tensions
+
+Site = tuple  # (segment, s) or (segment, s, (ox, oy, oz))
+
+
+def normalise_sites(sites, n_segments: int, owner: str = "sites") -> tuple:
+    """Validate marker sites and return them as ``((segment, s, (ox, oy, oz)), ...)``."""
+    if isinstance(sites, (str, bytes)) or not np.iterable(sites):
+        raise TypeError(f"{owner} must be a sequence of (segment, s) sites, got {sites!r}")
+    out = []
+    for i, site in enumerate(sites):
+        if not isinstance(site, (tuple, list)) or len(site) not in (2, 3):
+            raise ValueError(
+                f"{owner}[{i}] must be (segment, s) or (segment, s, offset_xyz), got {site!r}"
+            )
+        seg, s = site[0], site[1]
+        if (
+            not isinstance(seg, (int, np.integer))
+            or isinstance(seg, (bool, np.bool_))
+            or not 0 <= seg < n_segments
+        ):
+            raise ValueError(
+                f"{owner}[{i}]: segment {seg!r} does not exist (robot has {n_segments})"
+            )
+        if not _is_real(s) or not (np.isfinite(s) and 0.0 <= s <= 1.0):
+            raise ValueError(f"{owner}[{i}]: s must lie in [0, 1], got {s!r}")
+        offset = site[2] if len(site) == 3 else (0.0, 0.0, 0.0)
+        if (
+            not np.iterable(offset)
+            or len(offset) != 3
+            or not all(_is_real(v) for v in offset)
+            or not np.all(np.isfinite(np.asarray(offset, float)))
+        ):
+            raise ValueError(f"{owner}[{i}]: offset must be 3 finite numbers, got {offset!r}")
+        offset = tuple(float(v) for v in offset)
+        out.append((int(seg), float(s), offset))
+    return tuple(out)
+
+
+def _is_real(x) -> bool:
+    """A plain real number (Python or numpy scalar, or a 0-d array), not a bool or a string."""
+    if isinstance(x, (bool, np.bool_)) or np.ndim(x) != 0:
+        return False
+    return np.issubdtype(np.asarray(x).dtype, np.floating) or np.issubdtype(
+        np.asarray(x).dtype, np.integer
+    )
+
+
+def _sequence(owner: str, items, kind: str) -> tuple:
+    if isinstance(items, (str, bytes)) or not np.iterable(items) or isinstance(items, eqx.Module):
+        raise TypeError(f"{owner} must be a sequence of {kind}, got {type(items).__name__}")
+    return tuple(items)
+
+
+def _count(owner: str, value) -> int:
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+        raise TypeError(f"{owner} must be an integer, got {value!r}")
+    return int(value)
+
+
+class SceneConstants(eqx.Module):
+    """What the energy needs from the scene's parameters alone (not from ``q`` or the controls).
+
+    A solver computes it once per solve (:meth:`Scene.constants`) instead of once per energy
+    evaluation inside its loop, where every derivative would trace it again. It stays a
+    differentiable function of the parameters, so implicit gradients flow through it.
+    """
+
+    bending: Float[Array, "n p"]
+    torsion: Float[Array, "n p"]
+    node_mass: Float[Array, "n i m"] | None
+    body_mass: Float[Array, " n"] | None
+    guide_offsets: Float[Array, "g 3"] | None
+    rest_lengths: Float[Array, " m"] | None
+
+
+class Scene(eqx.Module):
+    """Everything needed to evaluate the potential energy and the equilibrium residual.
+
+    Args:
+        robot: the :class:`Robot`.
+        model: the strain model (:class:`PCC`, :class:`PAC`, :class:`PolynomialCurvature`).
+        tendons: :class:`Tendon` s; the controls vector has one entry per tendon, in order.
+        loads: :class:`Gravity` (at most one), :class:`PointMass`, :class:`PointForce`,
+            :class:`PointMoment`.
+        markers: default marker sites ``((segment, s), ...)`` or with a local offset, used by
+            :func:`pacjax.markers`, plots and identification.
+        quadrature_points: Gauss-Legendre points per segment for positions, the elastic energy
+            and the distributed weight.
+        rotation_substeps: Magnus sub-steps per segment (default: exact for the model).
+    """
+
+    robot: Robot
+    model: StrainModel
+    tendons: tuple[Tendon, ...] = ()
+    loads: tuple = ()
+    markers: tuple = eqx.field(static=True, default=())
+    quadrature_points: int = eqx.field(static=True, default=8)
+    rotation_substeps: int | None = eqx.field(static=True, default=None)
+
+    def __init__(
+        self,
+        robot,
+        model,
+        tendons=(),
+        loads=(),
+        markers=(),
+        quadrature_points=8,
+        rotation_substeps=None,
+    ):
+        if not isinstance(robot, Robot):
+            raise TypeError(f"Scene.robot must be a Robot, got {type(robot).__name__}")
+        self.robot = robot
+        self.model = model
+        self.tendons = _sequence("Scene.tendons", tendons, "Tendons")
+        self.loads = _sequence("Scene.loads", loads, "loads")
+        self.markers = normalise_sites(markers, robot.n_segments, "Scene.markers")
+        self.quadrature_points = _count("Scene.quadrature_points", quadrature_points)
+        self.rotation_substeps = (
+            None
+            if rotation_substeps is None
+            else _count("Scene.rotation_substeps", rotation_substeps)
+        )
+
+    def __check_init__(self):
+        if not isinstance(self.robot, Robot):
+            raise TypeError(f"Scene.robot must be a Robot, got {type(self.robot).__name__}")
+        if not isinstance(self.model, StrainModel):
+            raise TypeError(
+                "Scene.model must be a strain model (PCC, PAC, PolynomialCurvature), "
+                f"got {self.model!r}"
+            )
+        n = self.robot.n_segments
+        for i, t in enumerate(self.tendons):
+            if not isinstance(t, Tendon):
+                raise TypeError(f"Scene.tendons[{i}] must be a Tendon, got {type(t).__name__}")
+            if t.segment >= n:
+                raise ValueError(
+                    f"Scene.tendons[{i}] is anchored on segment {t.segment}, but the robot has "
+                    f"{n} segments (0..{n - 1})"
+                )
+        kinds = (Gravity, PointMass, PointForce, PointMoment)
+        for i, load in enumerate(self.loads):
+            if not isinstance(load, kinds):
+                raise TypeError(f"Scene.loads[{i}] must be one of {[k.__name__ for k in kinds]}")
+            if not isinstance(load, Gravity) and load.segment >= n:
+                raise ValueError(
+                    f"Scene.loads[{i}] ({type(load).__name__}) is on segment {load.segment}, but "
+                    f"the robot has {n} segments (0..{n - 1})"
+                )
+        if sum(isinstance(load, Gravity) for load in self.loads) > 1:
+            raise ValueError("Scene.loads holds more than one Gravity")
+        if self.loads_of(PointMass) and self.gravity is None:
+            raise ValueError("Scene.loads has a PointMass but no Gravity to pull on it")
+        # Gauss-Legendre with n points is exact to degree 2n - 1: the elastic energy (degree
+        # 2 k in s, + 4 for a taper's r^4) must be integrated exactly, or its Hessian loses rank.
+        tapered = any(seg.radius_tip is not None for seg in self.robot.segments)
+        needed = self.model.strain_degree() + 1 + (2 if tapered else 0)
+        if self.quadrature_points < needed:
+            raise ValueError(
+                f"Scene.quadrature_points must be >= {needed} for this model"
+                f"{' with tapered segments' if tapered else ''} (the elastic energy is integrated "
+                f"exactly only then), got {self.quadrature_points}"
+            )
+        if self.rotation_substeps is not None and self.rotation_substeps < 1:
+            raise ValueError(f"Scene.rotation_substeps must be >= 1, got {self.rotation_substeps}")
+
+    # ----------------------------------------------------------------------------- structure
+    def loads_of(self, kind, follower=None) -> list:
+        return [
+            x
+            for x in self.loads
+            if isinstance(x, kind) and (follower is None or x.follower == follower)
+        ]
+
+    @property
+    def gravity(self) -> Gravity | None:
+        found = self.loads_of(Gravity)
+        return found[0] if found else None
+
+    @property
+    def n_segments(self) -> int:
+        return self.robot.n_segments
+
+    @property
+    def dofs_per_segment(self) -> int:
+        return self.model.dofs_per_segment()
+
+    @property
+    def n_dofs(self) -> int:
+        return self.n_segments * self.dofs_per_segment
+
+    @property
+    def n_tendons(self) -> int:
+        return len(self.tendons)
+
+    @property
+    def is_conservative(self) -> bool:
+        """True when every load derives from the potential energy (no follower force, no moment)."""
+        return not (self.loads_of(PointForce, follower=True) or self.loads_of(PointMoment))
+
+    @property
+    def kinematics(self) -> KinematicsConfig:
+        substeps = self.rotation_substeps or self.model.exact_rotation_substeps()
+        return KinematicsConfig(self.quadrature_points, substeps)
+
+    def coordinates(self, q: Float[Array, " n_dofs"]) -> Float[Array, "n d"]:
+        """Flat coordinates as a (segments, coordinates per segment) matrix."""
+        return q.reshape(self.n_segments, self.dofs_per_segment)
+
+    def coordinate_names(self) -> tuple[str, ...]:
+        names = self.model.coordinate_names()
+        return tuple(f"{name}[{i}]" for i in range(self.n_segments) for name in names)
+
+    def coordinate_scale(self, dtype=float) -> Float[Array, " n_dofs"]:
+        """A natural size per coordinate: 1 for strains and angles, ``L`` (m) for ``dL``."""
+        d = self.dofs_per_segment
+        lengths = self.robot.stacked("length").astype(dtype)
+        scale = jnp.ones((self.n_segments, d), dtype).at[:, d - 1].set(lengths)
+        return scale.reshape(-1)
+
+    def elastic_stiffness_diagonal(self, dtype=float) -> Float[Array, " n_dofs"]:
+        """Stiffness scale per coordinate: the diagonal of the elastic Hessian at rest (> 0).
+
+        Used to scale the residual and as the damping of the flow. A coordinate that is not a
+        strain (PAC's bending-plane angle) takes the scale the model gives it.
+        """
+        q0 = jnp.zeros(self.n_dofs, dtype)
+        diag = jnp.diag(jax.hessian(self.elastic_energy)(q0))
+        return self.model.stiffness_scale(self.coordinates(diag)).reshape(-1)
+
+    # ----------------------------------------------------------------------------- kinematics
+    def frames(self, q, segment, s):
+        """World rotations (p, 3, 3) and positions (p, 3) at points ``(segment[k], s[k])``.
+
+        ``segment`` must be concrete (Python ints or a numpy array); ``s`` may be traced. Points
+        whose ``s`` is concrete take the knot path of :mod:`pacjax._model.kinematics`.
+        """
+        q = jnp.asarray(q)
+        segment = np.asarray(segment).reshape(-1)
+        s_value = None if isinstance(s, jax.core.Tracer) else concrete(s)
+        if s_value is not None:
+            return self._knot_frames(q, segment, np.broadcast_to(s_value, segment.shape))
+        layout = PointLayout(self.n_segments, segment)
+        rot, pos = grid_frames(
+            self.model,
+            self.coordinates(q),
+            self.robot.stacked("length").astype(q.dtype),
+            self.robot.base_rotation,
+            self.robot.base_position,
+            layout.grid(jnp.asarray(s, q.dtype).reshape(-1), q.dtype),
+            self.kinematics,
+        )
+        return layout.select(rot), layout.select(pos)
+
+    def _knot_frames(self, q, segment: np.ndarray, s: np.ndarray):
+        """Frames at points with concrete ``s`` (the knot path of
+        :mod:`pacjax._model.kinematics`)."""
+        knots = Knots(self.n_segments, segment, s, self.kinematics.min_intervals)
+        rot, pos, _ = knot_frames(
+            self.model,
+            self.coordinates(q),
+            self.robot.stacked("length").astype(q.dtype),
+            self.robot.base_rotation,
+            self.robot.base_position,
+            knots,
+        )
+        return knots.select(rot), knots.select(pos)
+
+    def tendon_lengths(self, q: Float[Array, " n_dofs"]) -> Float[Array, " m"]:
+        """Length (m) of every tendon at configuration ``q``."""
+        routing = TendonRouting(self.tendons)
+        rot, pos = self.frames(q, routing.point_segment, routing.point_s)
+        offsets = routing.local_offsets(self.tendons, q.dtype)
+        return routing.lengths(pos + matvec3(rot, offsets))
+
+    def rest_tendon_lengths(self, dtype=float) -> Float[Array, " m"]:
+        """Length (m) of every tendon on the straight robot at rest."""
+        routing = TendonRouting(self.tendons)
+        return routing.rest_lengths(self.tendons, self.robot.stacked("length").astype(dtype))
+
+    def tendon_tensions(self, q, controls) -> Float[Array, " m"]:
+        """Tension (N) of every tendon at configuration ``q`` under ``controls``."""
+        return tendon_tensions(
+            self.tendons, self.tendon_lengths(q), self.rest_tendon_lengths(q.dtype), controls
+        )
+
+    # ----------------------------------------------------------------------------- energy
+    def constants(self, dtype=float) -> SceneConstants:
+        """The parameter-only part of the energy (see :class:`SceneConstants`)."""
+        bending, torsion = robot_section_stiffness(self.robot, self.quadrature_points, dtype)
+        plan = self.energy_plan()
+        node_mass = body_mass = offsets = rest = None
+        if plan is not None and plan.gravity is not None:
+            node_mass = plan.node_mass(dtype)
+            body_mass = mass_beyond(self.robot, np.zeros(self.n_segments), dtype)
+        if plan is not None and plan.routing is not None:
+            offsets = plan.routing.local_offsets(self.tendons, dtype)
+            rest = self.rest_tendon_lengths(dtype)
+        return SceneConstants(bending, torsion, node_mass, body_mass, offsets, rest)
+
+    def elastic_energy(
+        self, q: Float[Array, " n_dofs"], consts: SceneConstants | None = None
+    ) -> Float[Array, ""]:
+        stiffness = None if consts is None else (consts.bending, consts.torsion)
+        return elastic_energy(
+            self.model, self.robot, self.coordinates(q), self.quadrature_points, stiffness
+        )
+
+    def potential_energy(
+        self, q: Float[Array, " n_dofs"], controls, consts: SceneConstants | None = None
+    ) -> Float[Array, ""]:
+        """Potential energy ``V(q; theta, u)`` (J): elastic, gravity, tendons, world forces.
+
+        ``consts``: :meth:`constants` when already computed (solvers pass it).
+        """
+        consts = self.constants(q.dtype) if consts is None else consts
+        energy = self.elastic_energy(q, consts)
+        plan = self.energy_plan()
+        if plan is None:
+            return energy
+        local = self._local_kinematics(self.coordinates(q), plan, consts)
+        return energy + self.load_energy(local, controls, plan, consts)
+
+    def _segment_frames(self, qi, length, knots, node_weights):
+        """One segment's knot frames and weighted tangent integral in its base frame."""
+        return segment_knot_frames(self.model, qi, length, knots, node_weights)
+
+    def segment_frames_jacobian(self, qi, length, knots, node_weights):
+        """``(d frames / d qi, frames)`` of :meth:`_segment_frames`: point by point along the
+        bending and plane angles for PCC/PAC
+        (:func:`pacjax._model.kinematics.segment_knot_jacobian`),
+        by forward derivatives otherwise."""
+        if has_plane_derivatives(self.model):
+            return segment_knot_jacobian(self.model, qi, length, knots, node_weights)
+        return jacobian_and_value(
+            lambda y: self._segment_frames(y, length, knots, node_weights), qi
+        )
+
+    def segment_frames_curvature(self, qi, lam, length, knots, node_weights):
+        """Hessian along ``qi`` of ``lam . frames(qi)`` (``lam`` a cotangent of
+        :meth:`_segment_frames`' value)."""
+        if has_plane_derivatives(self.model):
+            return segment_knot_curvature(self.model, qi, length, knots, node_weights, lam)
+        return jax.hessian(
+            lambda y: contract(lam, self._segment_frames(y, length, knots, node_weights))
+        )(qi)
+
+    def _segment_local(self, qi, length, knots, node_weights, chords):
+        """One segment's part of the local kinematics: its knot frames and weighted tangent
+        integral in its base frame (:meth:`_segment_frames`), and its tendons' lengths inside
+        it (None without :class:`LocalChords`)."""
+        rot, pos, moment = self._segment_frames(qi, length, knots, node_weights)
+        parts = None if chords is None else segment_tendon_parts(rot, pos, chords)
+        return rot, pos, moment, parts
+
+    def segment_inputs(self, plan: EnergyPlan, consts: SceneConstants, dtype):
+        """Per-segment arguments of :meth:`_segment_local` (leading axis: segments)."""
+        lengths = self.robot.stacked("length").astype(dtype)
+        grid = jnp.asarray(plan.knots.s, dtype)
+        chords = None if plan.chords is None else plan.chords.inputs(consts.guide_offsets)
+        return lengths, grid, consts.node_mass, chords
+
+    # The energy is E_el(q) + Psi(L_0(q_0), ..., L_n-1(q_n-1)): each segment's local kinematics
+    # L_i (frames at its knots in its own base frame) depends on its own coordinates only, and
+    # Psi (chaining, tendons, weight, loads) is cheap. _hessian.py uses this structure.
+    def energy_plan(self) -> EnergyPlan | None:
+        """The points and terms the load part of the energy needs (None: elastic only)."""
+        plan = EnergyPlan(self)
+        return plan if plan.points or plan.gravity is not None else None
+
+    def _local_kinematics(
+        self, coords: Float[Array, "n d"], plan: EnergyPlan, consts: SceneConstants
+    ):
+        """Per-segment local frames at the knots, and the local frames of traced load sites."""
+        segments = jax.vmap(self._segment_local)(
+            coords, *self.segment_inputs(plan, consts, coords.dtype)
+        )
+        traced = tuple(self.traced_local_frame(coords[k], k, s_k) for k, s_k in plan.points.traced)
+        return segments, traced
+
+    def traced_local_frame(self, qk, k: int, s_k):
+        length = self.robot.segments[k].length.astype(qk.dtype)
+        return local_frame(self.model, qk, length, jnp.asarray(s_k, qk.dtype), self.kinematics)
+
+    def load_energy(
+        self, local, controls, plan: EnergyPlan, consts: SceneConstants
+    ) -> Float[Array, ""]:
+        """``Psi``: gravity, tendon and world-force energy (J) from the local kinematics."""
+        (rot, pos, moment, parts), traced = local
+        dtype = rot.dtype
+        base_rot, base_pos = chain_segments(
+            rot[:, -1], pos[:, -1], self.robot.base_rotation, self.robot.base_position
+        )
+        # World frames of the points that need them (static slices, no gather).
+        segs = plan.world_segments + [k for k, _ in plan.points.traced]
+        local_rot = [r[None] for r, _ in traced]
+        local_pos = [p[None] for _, p in traced]
+        if plan.world_points:
+            local_rot.insert(0, take_runs(rot, plan.world_runs))
+            local_pos.insert(0, take_runs(pos, plan.world_runs))
+        rows = {k: i for i, k in enumerate(plan.world_points)}
+        rot_at = pos_at = Indexed(None, rows, len(plan.world_points))
+        if segs:
+            frame_rot = jnp.stack([base_rot[k] for k in segs])
+            frame_pos = jnp.stack([base_pos[k] for k in segs])
+            local_rot = jnp.concatenate(local_rot)
+            local_pos = jnp.concatenate(local_pos)
+            rot_at = Indexed(matmul3(frame_rot, local_rot), rows, len(plan.world_points))
+            pos_at = Indexed(
+                frame_pos + matvec3(frame_rot, local_pos), rows, len(plan.world_points)
+            )
+        energy = jnp.zeros((), dtype)
+        if plan.gravity is not None:
+            accel = plan.gravity.acceleration.astype(dtype)
+            # The body's first mass moment sum_i int rho A L p ds (kg m), by parts.
+            body = jnp.sum(consts.body_mass[:, None] * base_pos + matvec3(base_rot, moment), axis=0)
+            energy = energy - body @ accel
+            for pm, k in zip(plan.point_masses, plan.mass_ids, strict=True):
+                energy = energy - pm.mass.astype(dtype) * (pos_at[k] @ accel)
+        if plan.routing is not None:
+            if parts is not None:
+                lengths = jnp.sum(parts, axis=0)
+            else:
+                sl = plan.guide_ids
+                guides = pos_at[sl] + matvec3(rot_at[sl], consts.guide_offsets)
+                lengths = plan.routing.lengths(guides)
+            energy = energy + tendon_energy(self.tendons, lengths, consts.rest_lengths, controls)
+        for f, k in zip(plan.forces, plan.force_ids, strict=True):
+            energy = energy - jnp.sum(f.force.astype(dtype) * pos_at[k])
+        return energy
+
+    def nonconservative_forces(self, q: Float[Array, " n_dofs"]) -> Float[Array, " n_dofs"] | None:
+        """Generalised forces of follower forces and point moments (None when there are none)."""
+        followers = self.loads_of(PointForce, follower=True)
+        moments = self.loads_of(PointMoment)
+        if not (followers or moments):
+            return None
+        items = followers + moments
+        segs = np.asarray([x.segment for x in items])
+        # Known sites take the knot path. (Stacked with jnp they were traced: the paper's robot
+        # with PolynomialCurvature(3) under a follower force, a Jacobian of the residual took
+        # 5.7 ms per row on the grid path against 3.3 ms.)
+        ss = known_sites([x.s for x in items], q.dtype)
+        (rot, pos), pullback = jax.vjp(lambda q_: self.frames(q_, segs, ss), q)
+        dtype = q.dtype
+        cot_pos = jnp.zeros_like(pos)
+        cot_rot = jnp.zeros_like(rot)
+        if followers:
+            local = jnp.stack([f.force for f in followers]).astype(dtype)
+            world = matvec3(rot[: len(followers)], local)
+            cot_pos = cot_pos.at[: len(followers)].set(world)
+        for k, m in enumerate(moments, start=len(followers)):
+            moment = m.moment.astype(dtype)
+            if m.follower:
+                moment = rot[k] @ moment
+            cot_rot = cot_rot.at[k].set(moment_cotangent(moment, rot[k]))
+        (generalised,) = pullback((cot_rot, cot_pos))
+        return generalised
+
+    def residual(
+        self, q: Float[Array, " n_dofs"], controls, consts: SceneConstants | None = None
+    ) -> Float[Array, " n_dofs"]:
+        """Equilibrium residual ``F(q) = grad V(q) - Q_nc(q)`` (generalised forces)."""
+        force = jax.grad(self.potential_energy)(q, controls, consts)
+        extra = self.nonconservative_forces(q)
+        return force if extra is None else force - extra
+
+    # ----------------------------------------------------------------------------- conversion
+    def zeros(self, dtype=float) -> Float[Array, " n_dofs"]:
+        """The straight rest configuration."""
+        return jnp.zeros(self.n_dofs, dtype)
+
+    def default_controls(self, dtype=float) -> Float[Array, " m"]:
+        return jnp.zeros(self.n_tendons, dtype)

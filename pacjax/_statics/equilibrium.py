@@ -1,0 +1,209 @@
+"""Static equilibrium: continuation of the damped flow to a steady state, with stability.
+
+The paper finds equilibria by integrating the damped flow ``D qdot = -F(q)`` to a steady state.
+That flow is stiff (tendon gains against a soft body): an explicit integrator needs tens of
+thousands of steps. pacjax integrates it with linearised implicit Euler steps whose size grows as
+the residual falls (pseudo-transient continuation, :mod:`pacjax._statics.ptc`): far from
+equilibrium the
+steps follow the flow, near it they are Newton steps with the exact Jacobian, so the last steps
+*are* the Newton polish. ``D`` is the diagonal of the elastic stiffness, so the flow is well
+scaled. The loop runs inside ``optimistix.root_find`` with the implicit adjoint, so derivatives of
+the equilibrium with respect to any scene parameter or control come from the implicit function
+theorem (one linear solve), never from differentiating the iterations.
+
+``method="flow"`` first integrates the preconditioned flow with ``diffrax`` (an adaptive implicit
+Runge-Kutta method, stopped by a steady-state event) and then continues from there: slower, and
+the automatic fallback when continuation from the given start fails.
+
+An equilibrium that is a saddle (a column past buckling; PAC's straight state where ``phi`` is
+undefined) is detected from the smallest eigenvalue of the scaled stiffness and, by default, left
+along its direction of negative curvature.
+"""
+
+import dataclasses
+
+import diffrax
+import jax
+import jax.numpy as jnp
+import lineax as lx
+import numpy as np
+import optimistix as optx
+
+from .._jit import jit
+from .._model.inputs import (
+    as_traced_leaves,
+    check_controls,
+    check_q,
+    solver_dtype,
+    static_load_sites,
+)
+from .._model.scene import Scene
+from .continuation import (
+    conservative_part,
+    keep_better,
+    load_continuation,
+    order_continuation,
+    order_step,
+)
+from .options import SolverOptions
+from .problem import ScaledProblem, flow_field
+from .ptc import PseudoTransientContinuation, final_code, max_abs
+from .solution import Equilibrium
+
+
+def _flow_start(problem: ScaledProblem, y0, opts: SolverOptions):
+    """Integrate the preconditioned flow ``dy/dt = -r(y)`` with diffrax towards a steady state."""
+    sol = diffrax.diffeqsolve(
+        diffrax.ODETerm(flow_field),
+        opts.flow_solver,
+        t0=0.0,
+        t1=jnp.inf,
+        dt0=None,
+        y0=y0,
+        args=problem,
+        stepsize_controller=diffrax.PIDController(rtol=1e-6, atol=1e-9),
+        event=diffrax.Event(diffrax.steady_state_event(rtol=0.0, atol=opts.tol * 100)),
+        max_steps=opts.max_steps * 100,
+        throw=False,
+    )
+    return sol.ys[-1], sol.stats["num_steps"]
+
+
+def _stability_tol(opts, dtype):
+    return (
+        opts.stability_tol if opts.stability_tol is not None else 1e3 * float(jnp.finfo(dtype).eps)
+    )
+
+
+def make_solver(scene: Scene, opts: SolverOptions, dtype) -> PseudoTransientContinuation:
+    """The continuation root finder for a scene's structure and the solver options."""
+    return PseudoTransientContinuation(
+        rtol=0.0,
+        atol=opts.tol,
+        initial_dt=opts.initial_dt,
+        max_dt=opts.max_dt,
+        escapes=opts.escapes,
+        escape_size=opts.escape_size,
+        stability_tol=_stability_tol(opts, dtype),
+        symmetric=scene.is_conservative,
+        frozen_work=not scene.is_conservative,
+        structured=opts.hessian == "structured",
+    )
+
+
+def max_total_steps(opts: SolverOptions) -> int:
+    """Continuation steps allowed in all (``max_steps`` per escape attempt)."""
+    return opts.max_steps * (1 + opts.escapes)
+
+
+def start_point(problem: "ScaledProblem", q0, opts: SolverOptions):
+    """Scaled starting point ``y0 = q0 / sigma``, its straight segments' bending planes turned
+    to the force (:meth:`ScaledProblem.aligned`); no derivative flows through the start."""
+    frozen = jax.lax.stop_gradient(problem)
+    return frozen.aligned(jax.lax.stop_gradient(q0) / frozen.sigma, opts.tol)
+
+
+def equilibrium_from(
+    scene: Scene, problem: "ScaledProblem", solver, y, state, steps, tol: float
+) -> Equilibrium:
+    """The :class:`Equilibrium` at the continuation's final iterate ``y`` and state."""
+    residual_norm = max_abs(state.residual)
+    converged = residual_norm <= tol
+    energy = state.merit if scene.is_conservative else jnp.asarray(jnp.nan, state.merit.dtype)
+    return Equilibrium(
+        q=jax.lax.stop_gradient(problem.sigma) * y,
+        converged=converged,
+        residual_norm=residual_norm,
+        stable=state.eig > -solver.stability_tol,
+        min_hessian_eigenvalue=state.eig,
+        steps=steps,
+        result=final_code(state, converged),
+        energy=energy,
+    )
+
+
+def solve_core(scene: Scene, controls, q0, opts: SolverOptions) -> Equilibrium:
+    """One equilibrium (traceable; :func:`solve_equilibrium` and the batch solver wrap it)."""
+    problem = ScaledProblem.build(scene, controls)
+    frozen = jax.lax.stop_gradient(problem)
+    y0 = start_point(problem, q0, opts)
+    flow_steps = jnp.asarray(0)
+    if opts.method == "flow":
+        y0, flow_steps = _flow_start(frozen, y0, opts)
+    solver = make_solver(scene, opts, q0.dtype)
+    sol = optx.root_find(
+        ScaledProblem.root_fn,
+        solver,
+        y0,
+        args=problem,
+        has_aux=True,
+        max_steps=max_total_steps(opts),
+        throw=False,
+        adjoint=optx.ImplicitAdjoint(linear_solver=lx.LU()),
+    )
+    steps = sol.stats["num_steps"] + flow_steps
+    return equilibrium_from(scene, frozen, solver, sol.value, sol.state, steps, opts.tol)
+
+
+_solve = jit(solve_core)
+
+
+def solve_equilibrium(
+    scene: Scene, controls=None, q0=None, *, fallback: bool = True, **options
+) -> Equilibrium:
+    """Static equilibrium of ``scene`` under ``controls`` (one per tendon), starting from ``q0``.
+
+    Args:
+        scene: the :class:`Scene`.
+        controls: (n_tendons,) pull-in (m) for length-mode tendons, tension (N) for tension-mode
+            ones; default zeros.
+        q0: starting configuration (default straight). A straight PCC/PAC segment's
+            bending-plane angle is first turned to the force on it (:meth:`ScaledProblem.aligned`).
+        fallback: when continuation fails, retry with the diffrax flow (outside jit, compiled
+            only when needed). Whatever ``fallback`` says, a failed solve is first retried by
+            load continuation for a non-conservative scene (follower forces, dead moments; from
+            the equilibrium of its conservative part), then, for ``PolynomialCurvature`` of
+            order >= 2, by order continuation (from the equilibrium one order lower,
+            :func:`order_step`).
+        **options: :class:`SolverOptions` fields (``tol``, ``max_steps``, ``escapes``, ...).
+
+    Returns:
+        An :class:`Equilibrium`. Differentiable with respect to the scene's parameters and the
+        controls (implicit function theorem); ``jit``/``vmap`` compatible.
+    """
+    if not isinstance(scene, Scene):
+        raise TypeError(f"scene must be a pacjax.Scene, got {type(scene).__name__}")
+    opts = SolverOptions(**options)
+    dtype = solver_dtype(scene)
+    scene = static_load_sites(as_traced_leaves(scene, dtype))
+    controls = check_controls(scene, controls, dtype)
+    q0 = check_q(scene, q0, dtype)
+    eq = _solve(scene, controls, q0, opts)
+    if opts.method == "ptc" and not _is_traced(eq.converged):
+        if not bool(np.all(eq.converged)) and not scene.is_conservative:
+
+            def solve(conservative, start):
+                sc = conservative_part(scene) if conservative else scene
+                return _solve(sc, controls, start, opts)
+
+            eq = keep_better(eq, load_continuation(solve, q0))
+        step = order_step(scene)
+        if step is not None and not bool(np.all(eq.converged)):
+            retry = order_continuation(
+                step,
+                lambda start: solve_equilibrium(
+                    step.scene, controls, start, fallback=False, **options
+                ),
+                lambda start: _solve(scene, controls, jnp.asarray(start, dtype), opts),
+                np.asarray(q0),
+            )
+            eq = keep_better(eq, retry)
+        if fallback and not bool(np.all(eq.converged)):
+            eq = keep_better(
+                eq, _solve(scene, controls, q0, dataclasses.replace(opts, method="flow"))
+            )
+    return eq
+
+
+def _is_traced(x) -> bool:
+    return isinstance(x, jax.core.Tracer)

@@ -1,0 +1,64 @@
+"""The settings of every static solve: :class:`SolverOptions`."""
+
+import diffrax
+import equinox as eqx
+import numpy as np
+
+from .._chord import kvaerno5
+
+
+class SolverOptions(eqx.Module):
+    """Static solver settings (changing one recompiles).
+
+    Args:
+        tol: tolerance on the scaled residual (see :class:`Equilibrium`).
+        max_steps: maximum continuation steps (per escape attempt).
+        initial_dt: first pseudo-time step, in units of the elastic relaxation time.
+        max_dt: largest pseudo-time step (Newton beyond it).
+        escapes: how many times a converged saddle is left along its negative-curvature
+            direction and continued again (0: report saddles as they are).
+        escape_size: size of that perturbation (rad of curvature).
+        stability_tol: threshold on the smallest scaled eigenvalue for ``stable``.
+        method: ``"ptc"`` (continuation, default) or ``"flow"`` (diffrax).
+        flow_solver: diffrax solver of the flow method (default ``diffrax.Kvaerno5`` with
+            :class:`pacjax._chord.DenseChord`).
+        hessian: ``"structured"`` (default: per-segment forward derivatives of the kinematics,
+            :mod:`pacjax._model.hessian`, plus the forward derivative of the follower loads alone
+            in a non-conservative scene) or ``"autodiff"`` (``jax.jacfwd`` of the residual).
+            Both are exact; they differ in cost.
+    """
+
+    tol: float = eqx.field(static=True, default=1e-10)
+    max_steps: int = eqx.field(static=True, default=100)
+    initial_dt: float = eqx.field(static=True, default=1.0)
+    max_dt: float = eqx.field(static=True, default=1e12)
+    escapes: int = eqx.field(static=True, default=2)
+    escape_size: float = eqx.field(static=True, default=0.05)
+    stability_tol: float | None = eqx.field(static=True, default=None)
+    method: str = eqx.field(static=True, default="ptc")
+    flow_solver: diffrax.AbstractSolver = eqx.field(static=True, default=kvaerno5())
+    hessian: str = eqx.field(static=True, default="structured")
+
+    def __check_init__(self):
+        if self.hessian not in ("structured", "autodiff"):
+            raise ValueError(f"hessian must be 'structured' or 'autodiff', got {self.hessian!r}")
+        if self.method not in ("ptc", "flow"):
+            raise ValueError(f"method must be 'ptc' or 'flow', got {self.method!r}")
+        for name in ("max_steps", "escapes"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+                raise TypeError(f"{name} must be an integer, got {value!r}")
+        for name in ("tol", "initial_dt", "max_dt", "escape_size", "stability_tol"):
+            value = getattr(self, name)
+            if value is None and name == "stability_tol":
+                continue
+            if isinstance(value, bool) or not isinstance(value, (int, float, np.floating)):
+                raise TypeError(f"{name} must be a number, got {value!r}")
+            if not (np.isfinite(value) and value > 0):
+                raise ValueError(f"{name} must be finite and > 0, got {value}")
+        if self.max_steps < 1:
+            raise ValueError(f"max_steps must be >= 1, got {self.max_steps}")
+        if self.escapes < 0:
+            raise ValueError(f"escapes must be >= 0, got {self.escapes}")
+        if not isinstance(self.flow_solver, diffrax.AbstractSolver):
+            raise TypeError(f"flow_solver must be a diffrax solver, got {self.flow_solver!r}")

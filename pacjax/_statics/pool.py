@@ -1,0 +1,379 @@
+"""The slot pool of :func:`pacjax.solve_batch`: rows solved a few continuation steps at a time,
+each slot refilled as soon as its row has finished.
+
+One compiled, ``vmap``-ed call (:func:`_advance`) runs the continuation of every slot for
+:func:`_steps_per_round` steps; the starting points come a block of rows at a time
+(:class:`_StartBlocks`). On a single CPU device two pools take rows from one queue, each in its
+own thread (:func:`pool_lanes`); with several devices the pool is sharded along the slots.
+"""
+
+import queue
+import threading
+
+import jax
+import jax.numpy as jnp
+import jax.tree_util as jtu
+import numpy as np
+
+from .._jit import jit
+from .equilibrium import equilibrium_from, make_solver, max_total_steps, start_point
+from .problem import ScaledProblem
+
+#: Continuation steps per round of the slot pool (a finished row waits at most this many
+#: steps for its slot to be refilled): 2 on CPU, 4 on accelerators (see :func:`_steps_per_round`).
+STEPS_PER_ROUND = {"cpu": 2}
+_STEPS_PER_ROUND_DEFAULT = 4
+
+
+def _steps_per_round() -> int:
+    """Steps per round on the default backend. On XLA:CPU (the paper's robot with PAC, 1,000
+    rows in a pool of 128 slots) 2 steps ran 1.95 s against 1.98-2.05 s for 3 and 2.10-2.29 s
+    for 4: a finished slot idles for fewer steps, and a round costs little once the starting
+    points are computed per block of rows (:func:`_start_block`) instead of in every round.
+    """
+    return STEPS_PER_ROUND.get(jax.default_backend(), _STEPS_PER_ROUND_DEFAULT)
+
+
+_TAGS = frozenset()
+
+
+@jit
+def _start_block(scene, opts, update, controls, params, q0):
+    """Scaled starting points (:func:`pacjax._statics.equilibrium.start_point`) of a block of
+    rows."""
+
+    def one(u, p, q):
+        sc = scene if update is None else update(scene, p)
+        return start_point(ScaledProblem.build(sc, u), q, opts)
+
+    return jax.vmap(one)(controls, params, q0)
+
+
+@jit
+def _advance(scene, opts, update, controls, params, y, state, reset, y_reset, active):
+    """One round of the slot pool: restart the ``reset`` slots from ``y_reset`` (scaled
+    starting points from :func:`_start_block`, computed once per row rather than for every slot
+    in every round), then run every active slot's continuation for up to
+    :func:`_steps_per_round` steps (fewer when all are done).
+
+    The steps are those of :func:`pacjax._statics.equilibrium.solve_core` (the same root finder,
+    resumed round after round), so a row's iterates do not depend on which rows share the pool.
+    Returns the new ``(y, state)``, whether each slot is done, and its :class:`Equilibrium`.
+    """
+    dtype = controls.dtype
+    limit = max_total_steps(opts)
+    per_round = _steps_per_round()
+    fn = ScaledProblem.root_fn
+
+    def one(u, p, y_, st_, reset_, y_start, active_):
+        sc = scene if update is None else update(scene, p)
+        problem = ScaledProblem.build(sc, u)
+        solver = make_solver(sc, opts, dtype)
+        f_struct, aux_struct = jax.eval_shape(fn, y_, problem)
+        st_start = solver.init(fn, y_start, problem, None, f_struct, aux_struct, _TAGS)
+        y_ = jnp.where(reset_, y_start, y_)
+        st_ = jtu.tree_map(lambda a, b: jnp.where(reset_, a, b), st_start, st_)
+
+        def running(y, st):
+            # As optimistix.root_find: stop when the solver terminates, y is not finite or
+            # the step budget is spent.
+            done, _ = solver.terminate(fn, y, problem, None, st, _TAGS)
+            finite = jnp.all(jnp.isfinite(y))
+            return active_ & ~done & finite & (st.step < limit)
+
+        def cond(carry):
+            y, st, k = carry
+            return (k < per_round) & running(y, st)
+
+        def body(carry):
+            y, st, k = carry
+            y, st, _ = solver.step(fn, y, problem, None, st, _TAGS)
+            return y, st, k + 1
+
+        y_, st_, _ = jax.lax.while_loop(cond, body, (y_, st_, jnp.asarray(0)))
+        eq = equilibrium_from(sc, problem, solver, y_, st_, st_.step, opts.tol)
+        return y_, st_, ~running(y_, st_), eq
+
+    return jax.vmap(one)(controls, params, y, state, reset, y_reset, active)
+
+
+#: Solver slots per CPU device. On XLA:CPU a row-step costs about the same in a pool of 128 as in
+#: one of 1,000 (1.5 and 1.25 ms, the paper's robot with PAC), and a smaller pool is refilled
+#: sooner, so 1,000 rows in a pool of 128 ran at 46 eq/s against 31 in one pool of 1,000.
+CPU_POOL_SLOTS = 128
+
+
+def pool_slots(chunk: int, n_devices: int) -> int:
+    """Slots of the solver pool: the chunk, capped per device on CPU (accelerators keep the
+    whole chunk: their rows run in parallel); a multiple of the device count."""
+    slots = chunk
+    if jax.default_backend() == "cpu":
+        slots = min(slots, CPU_POOL_SLOTS * n_devices)
+    return -(-slots // n_devices) * n_devices
+
+
+def _initial_state(scene, opts, size, dtype, sharding):
+    """Placeholder ``(y, state)`` of a pool of ``size`` slots (every slot is reset first)."""
+    n = scene.n_dofs
+    solver = make_solver(scene, opts, dtype)
+    y = jnp.zeros(n, dtype)
+    f_struct = jax.ShapeDtypeStruct((n,), dtype)
+    state = solver.init(None, y, None, None, f_struct, None, _TAGS)
+    # Strongly typed, as _advance returns them (a weak type would compile a second version).
+    y, state = jtu.tree_map(
+        lambda x: jnp.asarray(jnp.broadcast_to(x, (size,) + x.shape), x.dtype), (y, state)
+    )
+    if sharding is not None:
+        y, state = jax.device_put((y, state), sharding)
+    return y, state
+
+
+class _StartBlocks:
+    """Starting points of the rows, computed a block of rows at a time (one compiled call per
+    block, not one per slot and round): the unscaled ``q`` from ``starts`` and the scaled,
+    aligned ``y`` the continuation starts from. Only the blocks still being handed out are kept.
+    """
+
+    def __init__(self, scene, controls, starts, params, update, opts, block, dtype, sharding):
+        self.scene, self.controls, self.starts = scene, controls, starts
+        self.params, self.update, self.opts = params, update, opts
+        self.block, self.dtype, self.sharding = block, dtype, sharding
+        n_devices = 1 if sharding is None else len(sharding.mesh.devices.flat)
+        self.padded = -(-block // n_devices) * n_devices
+        self.blocks: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+
+    def _compute(self, b):
+        n = self.controls.shape[0]
+        rows = np.arange(b * self.block, min((b + 1) * self.block, n))
+        u = self.controls[rows]
+        q = np.asarray(self.starts(rows, u), dtype=float)
+        if self.params is None:
+            p = np.zeros(len(rows))
+        else:
+            p = jtu.tree_map(lambda x: x[rows], self.params)
+        inputs = (
+            jnp.asarray(pad_rows(u, self.padded), self.dtype),
+            jtu.tree_map(lambda x: jnp.asarray(pad_rows(x, self.padded)), p),
+            jnp.asarray(pad_rows(q, self.padded), self.dtype),
+        )
+        if self.sharding is not None:
+            inputs = jax.device_put(inputs, self.sharding)
+        y = _start_block(self.scene, self.opts, self.update, *inputs)
+        return q, np.asarray(y)[: len(rows)]
+
+    def take(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(q, y)`` starts of ``rows`` (increasing), dropping the blocks handed out in full."""
+        q_out = np.empty((len(rows), self.scene.n_dofs))
+        y_out = np.empty((len(rows), self.scene.n_dofs))
+        for b in np.unique(rows // self.block).tolist():
+            if b not in self.blocks:
+                self.blocks[b] = self._compute(b)
+            mine = rows // self.block == b
+            q, y = self.blocks[b]
+            at = rows[mine] - b * self.block
+            q_out[mine], y_out[mine] = q[at], y[at]
+        last = rows[-1] if len(rows) else -1
+        for b in [b for b in self.blocks if (b + 1) * self.block - 1 <= last]:
+            del self.blocks[b]
+        return q_out, y_out
+
+
+#: Slot pools run side by side on a single CPU device, each in its own thread (see
+#: :func:`pool_lanes`).
+CPU_LANES = 2
+
+
+def pool_lanes(chunk: int, sharding, warm_start: bool) -> int:
+    """Slot pools to run at once, each with ``chunk / lanes`` slots (at most
+    :data:`CPU_POOL_SLOTS`). One XLA:CPU execution of a round keeps about 1.45 of 2 cores busy
+    (small kernels run on one thread, and the host works between rounds), so on a single CPU
+    device :data:`CPU_LANES` pools share the rows, each in its own thread and with the same
+    compiled round: the paper's robot with PAC, 1,000 rows, ran in 0.91-1.02 s on 2 cores
+    (1.85-1.91 of them busy) against 1.11-1.22 s in one pool. Not with several devices (their
+    shards already run in parallel) and not with warm starts (a row's start would depend on
+    which rows the other pool had finished by then)."""
+    if sharding is not None or warm_start or jax.default_backend() != "cpu":
+        return 1
+    return max(1, min(CPU_LANES, chunk))
+
+
+class _RowQueue:
+    """The rows in order, handed out with their starting points to the pools (thread-safe)."""
+
+    def __init__(self, n: int, blocks: "_StartBlocks"):
+        self.n, self.blocks, self.next = n, blocks, 0
+        self.lock = threading.Lock()
+
+    def take(self, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        with self.lock:
+            rows = np.arange(self.next, min(self.next + k, self.n))
+            self.next += len(rows)
+            q, y = self.blocks.take(rows)
+        return rows, q, y
+
+
+_LANE_DONE = object()
+
+
+def pool_solve(
+    scene, controls, starts, params, update, opts, size, block, dtype, sharding, lanes=1
+):
+    """Solve every row in ``lanes`` pools of ``size`` slots, refilled as rows finish (the
+    batch does not wait for its slowest row); starting points are computed ``block`` rows at
+    a time. Yields ``(rows, q_start, Equilibrium)`` of finished rows."""
+    blocks = _StartBlocks(scene, controls, starts, params, update, opts, block, dtype, sharding)
+    queue_ = _RowQueue(controls.shape[0], blocks)
+    ready = _RoundCompile(scene, controls, params, update, opts, size, dtype, sharding)
+    ready.start()
+    args = (scene, controls, queue_, params, update, opts, size, dtype, sharding)
+    if lanes == 1:
+        try:
+            yield from _pool_lane(*args, ready=ready)
+        finally:
+            ready.join()
+        return
+    results: queue.SimpleQueue = queue.SimpleQueue()
+    stop = threading.Event()
+
+    def run():
+        try:
+            for item in _pool_lane(*args, stop=stop, ready=ready):
+                results.put(item)
+        except BaseException as error:  # handed to the caller's thread
+            stop.set()
+            results.put(error)
+        finally:
+            results.put(_LANE_DONE)
+
+    threads = [threading.Thread(target=run, daemon=True) for _ in range(lanes)]
+    for t in threads:
+        t.start()
+    try:
+        running = lanes
+        while running:
+            item = results.get()
+            if item is _LANE_DONE:
+                running -= 1
+            elif isinstance(item, BaseException):
+                raise item
+            else:
+                yield item
+    finally:
+        # Also when the caller stops early or a pool failed: the others stop after their round.
+        stop.set()
+        for t in threads:
+            t.join()
+        ready.join()
+
+
+def _pool_lane(
+    scene,
+    controls,
+    rows_queue,
+    params,
+    update,
+    opts,
+    size,
+    dtype,
+    sharding,
+    stop=None,
+    ready=None,
+):
+    """One pool of ``size`` slots taking rows from ``rows_queue`` until it is empty (or
+    ``stop`` is set); its rounds wait for ``ready`` (the round compiled, see
+    :class:`_RoundCompile`)."""
+    slot_row = np.full(size, -1)
+    u_pool, p_pool, y_pool = _empty_pool(scene, controls, params, size)
+    q_pool = np.zeros((size, scene.n_dofs))
+    y, state = _initial_state(scene, opts, size, dtype, sharding)
+    while stop is None or not stop.is_set():
+        free = np.flatnonzero(slot_row < 0)
+        rows, q_new, y_new = rows_queue.take(len(free))
+        free = free[: len(rows)]
+        reset = np.zeros(size, bool)
+        reset[free] = True
+        slot_row[free] = rows
+        u_pool[free] = controls[rows]
+        q_pool[free], y_pool[free] = q_new, y_new
+        if params is not None:
+
+            def assign(pool, x, free=free, rows=rows):
+                pool[free] = x[rows]
+
+            jtu.tree_map(assign, p_pool, params)
+        active = slot_row >= 0
+        if not active.any():
+            return
+        if ready is not None:
+            ready.wait()
+        y, state, done, eq = _round(
+            scene, opts, update, dtype, sharding, u_pool, p_pool, y, state, reset, y_pool, active
+        )
+        done = np.asarray(done) & active
+        if done.any():
+            slots = np.flatnonzero(done)
+            eq_rows = jtu.tree_map(lambda x, s=slots: np.asarray(x)[s], eq)
+            yield slot_row[slots], q_pool[slots].copy(), eq_rows
+            slot_row[slots] = -1
+
+
+def _empty_pool(scene, controls, params, size):
+    """Host buffers of a pool's commands, parameters and scaled starting points."""
+    u_pool = np.zeros((size, controls.shape[1]))
+    y_pool = np.zeros((size, scene.n_dofs))
+    if params is None:
+        p_pool = np.zeros((size,))
+    else:
+        p_pool = jtu.tree_map(lambda x: np.zeros((size,) + x.shape[1:], x.dtype), params)
+    return u_pool, p_pool, y_pool
+
+
+def _round(scene, opts, update, dtype, sharding, u_pool, p_pool, y, state, reset, y_pool, active):
+    """One :func:`_advance` round from the pool's host buffers."""
+    inputs = (
+        jnp.asarray(u_pool, dtype),
+        jtu.tree_map(jnp.asarray, p_pool),
+        jnp.asarray(reset),
+        jnp.asarray(y_pool, dtype),
+        jnp.asarray(active),
+    )
+    if sharding is not None:
+        inputs = jax.device_put(inputs, sharding)
+    u_dev, p_dev, reset_dev, y_dev, active_dev = inputs
+    return _advance(scene, opts, update, u_dev, p_dev, y, state, reset_dev, y_dev, active_dev)
+
+
+class _RoundCompile(threading.Thread):
+    """Compiles the pool's round in the background (a round with no slot active), while the
+    first block of starting points is traced, compiled and computed: the two compilations
+    overlap. The pools wait for it (:meth:`wait`), which raises what it raised."""
+
+    def __init__(self, scene, controls, params, update, opts, size, dtype, sharding):
+        super().__init__(daemon=True)
+        self.args = (scene, controls, params, update, opts, size, dtype, sharding)
+        self.error = None
+
+    def run(self):
+        scene, controls, params, update, opts, size, dtype, sharding = self.args
+        try:
+            u_pool, p_pool, y_pool = _empty_pool(scene, controls, params, size)
+            y, state = _initial_state(scene, opts, size, dtype, sharding)
+            idle = np.zeros(size, bool)
+            out = _round(
+                scene, opts, update, dtype, sharding, u_pool, p_pool, y, state, idle, y_pool, idle
+            )
+            jax.block_until_ready(out)
+        except BaseException as error:  # raised again in the pools' threads
+            self.error = error
+
+    def wait(self):
+        self.join()
+        if self.error is not None:
+            raise self.error
+
+
+def pad_rows(x, size):
+    if x is None or x.shape[0] == size:
+        return x
+    pad = np.repeat(x[-1:], size - x.shape[0], axis=0)
+    return np.concatenate([x, pad])

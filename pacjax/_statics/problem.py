@@ -1,0 +1,207 @@
+"""The equilibrium problem in scaled coordinates: residual, merit, linearisation and the
+continuation's moves on the bending vector."""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._model.hessian import dead_followers, energy_derivatives, follower_jacobian
+from .._model.scene import Scene, SceneConstants
+
+
+class ScaledProblem(eqx.Module):
+    """The equilibrium problem in scaled coordinates ``y = q / sigma``.
+
+    The residual ``r(y) = F(sigma y) / (d sigma)`` is dimensionless (``d`` the diagonal of the
+    elastic stiffness); ``D = diag(d)`` is the damping of the flow.
+    """
+
+    scene: Scene
+    controls: jax.Array
+    sigma: jax.Array
+    row: jax.Array
+    consts: SceneConstants
+    # Follower forces as dead ones (``pacjax._model.hessian.dead_followers``), for the Jacobian.
+    dead_scene: Scene | None = None
+    dead_consts: SceneConstants | None = None
+    dead_index: tuple[int, ...] = eqx.field(static=True, default=())
+
+    @staticmethod
+    def build(scene: Scene, controls: jax.Array) -> "ScaledProblem":
+        """The scaled problem; the scene's parameter-only terms are computed here, once, not
+        in every energy evaluation of the solver loop (they stay differentiable)."""
+        dtype = controls.dtype
+        sigma = jax.lax.stop_gradient(scene.coordinate_scale(dtype))
+        d = jax.lax.stop_gradient(scene.elastic_stiffness_diagonal(dtype))
+        dead = None if scene.is_conservative else dead_followers(scene)
+        dead_scene, index = (None, ()) if dead is None else dead
+        dead_consts = None if dead is None else dead_scene.constants(dtype)
+        return ScaledProblem(
+            scene,
+            controls,
+            sigma,
+            1.0 / (d * sigma),
+            scene.constants(dtype),
+            dead_scene,
+            dead_consts,
+            index,
+        )
+
+    def q(self, y):
+        return self.sigma * y
+
+    def residual(self, y):
+        return self.scene.residual(self.q(y), self.controls, self.consts) * self.row
+
+    def residual_and_merit(self, y):
+        """Scaled residual and the potential energy of the conservative part (J), the merit
+        of the continuation (with the non-conservative forces frozen, see :meth:`drive`)."""
+        q = self.q(y)
+        energy, grad = jax.value_and_grad(self.scene.potential_energy)(
+            q, self.controls, self.consts
+        )
+        if not self.scene.is_conservative:
+            grad = grad - self.scene.nonconservative_forces(q)
+        return grad * self.row, energy
+
+    def drive(self, y):
+        """Non-conservative generalised forces in scaled coordinates: ``r = dE/dy - drive``
+        up to the row scale (``frozen_work`` of :class:`PseudoTransientContinuation`)."""
+        return self.sigma * self.scene.nonconservative_forces(self.q(y))
+
+    def energy(self, y):
+        """Potential energy (J) at ``y``: the merit of a conservative scene, without its
+        gradient."""
+        return self.scene.potential_energy(self.q(y), self.controls, self.consts)
+
+    def linearise(self, y):
+        """Scaled residual and its Jacobian, ``(dr/dy, (r, (merit, weights)))``, from the
+        structured Hessian of the potential energy. Follower forces of a PCC/PAC scene enter
+        it as dead forces plus the turning of their direction
+        (:func:`pacjax._model.hessian.follower_jacobian`; the residual is
+        :meth:`residual_and_merit`'s).
+        Other non-conservative scenes add the forward derivative of their non-conservative
+        loads alone (a few points of the kinematics), not of the whole residual: on 2 CPU cores
+        a warm batch of 24 equilibria of the paper's robot with ``PolynomialCurvature(6)`` (12
+        points) under a 3.41 N follower force took 174 s against 196 s."""
+        q = self.q(y)
+        if self.dead_scene is not None:
+            hessian = follower_jacobian(
+                self.scene, self.dead_scene, self.dead_index, q, self.controls, self.dead_consts
+            )
+            r, energy = self.residual_and_merit(y)
+            jac = self.row[:, None] * hessian * self.sigma[None, :]
+            return jac, (r, (energy, self.weights()))
+        energy, grad, hessian = energy_derivatives(self.scene, q, self.controls, self.consts)
+        merit = energy
+        if not self.scene.is_conservative:
+
+            def forces(x):
+                value = self.scene.nonconservative_forces(x)
+                return value, value
+
+            d_forces, value = jax.jacfwd(forces, has_aux=True)(q)
+            grad, hessian = grad - value, hessian - d_forces
+        jac = self.row[:, None] * hessian * self.sigma[None, :]
+        return jac, (grad * self.row, (merit, self.weights()))
+
+    def moved(self, y, dy):
+        """The iterate after the continuation step ``dy`` from ``y``: ``y + dy``, except for the
+        bending of a PCC/PAC segment whose plane angle ``phi`` is free (torsion-free frame) and
+        whose end is turned (``theta = beta . c != 0``, the bending angle at its end).
+
+        There the curvatures ``c`` and ``phi`` are polar coordinates. A tendon's length in the
+        segment, ``-r theta cos(phi - alpha)`` up to the chords, is linear in the bending vector
+        ``B = theta e(phi)`` (``e(phi)`` the plane's direction) and bilinear in ``(c, phi)``, so
+        steps along ``phi`` crept (3-4 steps for the plane's turn on the paper's robot). The
+        step is taken on ``B``: ``B' = B + dtheta e(phi) + theta dphi e'(phi)``, the plane
+        turned to ``B'`` by less than a quarter turn (a bend that passes through straight goes
+        on with ``theta < 0``), and every curvature carried along as a vector in the plane,
+        ``c' = (c + dc) cos(turn) + c dphi sin(turn)``, so that ``theta' e(phi') = B'``. This
+        agrees with ``y + dy`` to first order: the step's descent and the search along it are
+        unchanged. On the paper's robot with PAC (64 random commands, 200 g tip mass) a row took
+        6.5 continuation steps (mean) against 8.0; moving the plane to the principal axis of
+        the curvatures' vectors instead took 6.9-7.0.
+        """
+        k = self.scene.model.free_plane_angle()
+        if k is None:
+            return y + dy
+        n, d = self.scene.n_segments, self.scene.dofs_per_segment
+        q = (self.sigma * y).reshape(n, d)
+        dq = (self.sigma * dy).reshape(n, d)
+        beta = self.scene.model.plane_angle_basis(jnp.ones((), y.dtype))
+        c, dc, dphi = q[:, :k], dq[:, :k], dq[:, k]
+        theta = c @ beta
+        ahead = theta + dc @ beta
+        # The angle of B' from e(phi), in (-pi/2, pi/2]: arctan(theta dphi / (theta + dtheta)).
+        turn = jnp.arctan2(theta * dphi * jnp.where(ahead < 0, -1.0, 1.0), jnp.abs(ahead))
+        c_new = (c + dc) * jnp.cos(turn)[:, None] + c * (dphi * jnp.sin(turn))[:, None]
+        # An end that is not turned (straight, or an S of PAC) has no B to move: y + dy.
+        flat = theta == 0
+        c_new = jnp.where(flat[:, None], c + dc, c_new)
+        turn = jnp.where(flat, dphi, turn)
+        q_new = (q + dq).at[:, :k].set(c_new).at[:, k].set(q[:, k] + turn)
+        return q_new.reshape(-1) / self.sigma
+
+    def aligned(self, y, tol: float, keep=None):
+        """``y`` with the bending plane of each straight segment turned to the force on it.
+
+        A PCC/PAC segment's bending-plane angle ``phi`` is undefined while it is straight (the
+        shape does not depend on it), so a straight start is a degenerate saddle: the
+        continuation first bends the segments in whatever plane ``phi`` says and then turns the
+        planes, with an indefinite stiffness all the while (on the paper's robot, 13 steps
+        from straight against 9 from aligned planes, batch mean). At zero curvature the force on
+        ``c0`` is exactly ``a cos(phi) + b sin(phi)``, since it is linear in the bending
+        direction ``(cos(phi), sin(phi))``: the residuals at ``phi = 0`` and ``pi / 2`` give
+        the plane of steepest descent. ``phi`` is taken in ``(-pi/2, pi/2]``, the half that the
+        regulariser ``k (1 - cos(phi))`` prefers; the sign of ``c0`` then picks the side. A
+        segment that is bent keeps its ``phi``, and so does one where ``keep`` (a boolean per
+        segment) says so. A straight segment whose force is below ``tol`` (scaled) takes the
+        plane of the segment before it (the first segment keeps its ``phi``).
+        """
+        k = self.scene.model.free_plane_angle()
+        if k is None:
+            return y
+        n, d = self.scene.n_segments, self.scene.dofs_per_segment
+        coords = y.reshape(n, d)
+        straight = jnp.all(coords[:, :k] == 0, axis=1)
+        if keep is not None:
+            straight = straight & ~keep
+
+        def force_on_c0(phi):
+            trial = coords.at[:, k].set(jnp.where(straight, phi, coords[:, k]))
+            return self.residual(trial.reshape(-1)).reshape(n, d)[:, 0]
+
+        # One batched residual (one copy of its graph to compile).
+        a, b = jax.vmap(force_on_c0)(jnp.asarray([0.0, 0.5 * np.pi], y.dtype))
+        phi = jnp.arctan2(-b, -a)
+        phi = jnp.where(phi > 0.5 * np.pi, phi - np.pi, phi)
+        phi = jnp.where(phi <= -0.5 * np.pi, phi + np.pi, phi)
+        turn = straight & (jnp.hypot(a, b) > tol) & jnp.isfinite(phi)
+        phi = jnp.where(turn, phi, coords[:, k])
+        # A straight segment with no force on it is loaded only through the segments before
+        # it, which bend in their own planes: it takes its predecessor's plane. (Kept at its
+        # phi, it meets a saddle in that plane: the paper's robot pulled by one tendon of
+        # section 1 took 34-40 steps against 9.)
+        inherit = straight & ~turn
+        for i in range(1, n):
+            phi = phi.at[i].set(jnp.where(inherit[i], phi[i - 1], phi[i]))
+        return coords.at[:, k].set(phi).reshape(-1)
+
+    def weights(self):
+        """``sqrt(d) sigma``: maps scaled coordinates to ``D^1/2``-weighted ones."""
+        return jnp.sqrt(self.sigma / self.row)
+
+    @staticmethod
+    def root_fn(y, args: "ScaledProblem"):
+        """``(r, (merit, weights))`` for :class:`PseudoTransientContinuation`."""
+        r, merit = args.residual_and_merit(y)
+        return r, (merit, args.weights())
+
+
+@eqx.filter_jit
+def flow_field(t, y, problem: ScaledProblem):
+    """``-r(y)``, jitted on its own so that the solver's calls and derivatives share one trace
+    (the problem comes in diffrax's ``args``)."""
+    return -problem.residual(y)

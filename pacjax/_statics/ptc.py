@@ -1,0 +1,355 @@
+"""Pseudo-transient continuation as an optimistix root finder.
+
+It integrates the damped flow ``D qdot = -F(q)`` with linearised implicit Euler steps
+``(I / dt + dr/dy) dy = -r`` in scaled coordinates (``r = F / (d sigma)``, ``y = q / sigma``,
+``d`` the diagonal of the elastic stiffness). The pseudo-time step ``dt`` grows with the fall of
+the residual (switched evolution relaxation), so the steps become Newton steps near the
+solution; a step that raises the merit (the energy for conservative scenes; see ``frozen_work``
+for the others) is rejected and ``dt`` shrinks until the step is a short stretch of the flow,
+which is a descent direction whatever the curvature. A step ``dy`` lands at the problem's
+``moved(y, dy)`` where it has one (equal to ``y + dy`` to first order; PCC/PAC bending moves as
+a vector, :meth:`pacjax._statics.problem.ScaledProblem.moved`). A converged saddle (smallest
+eigenvalue of the scaled stiffness below ``-stability_tol``) is left along its negative-curvature
+direction, a bounded number of times, and the continuation then goes on until the stiffness is positive again
+(a residual below the tolerance next to the saddle is not convergence; for a non-conservative
+problem only on the step after the escape, since the flow may lead back to the same point).
+
+Written as an ``optimistix.AbstractRootFinder`` so that ``optimistix.root_find`` runs the loop and
+provides the implicit-function-theorem adjoint: the Hessian graph is traced once.
+"""
+
+from typing import Any
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import optimistix as optx
+from jaxtyping import Array, Bool, Float, Int
+
+from . import linalg as _linalg
+from .solution import MAX_STEPS, NONFINITE, STALLED, SUCCESS
+
+_MIN_DT = 1e-10
+_MIN_ALPHA = 1.0 / 256
+# Scaled residual below which a non-conservative solve tries plain Newton steps first.
+_NEWTON_NEAR = 1e-2
+# Bounds on the growth of dt after a full step (the ratio of the residuals before and after it,
+# switched evolution relaxation). The first step from straight takes the residual of the paper's
+# robot from about 10 to 0.1: capped at 10x, the next steps were still 25-40 % short of Newton
+# along the softest mode (the bending planes) and crept; capped at 100x, 1,000 random commands
+# with a 200 g tip mass took 8.11 steps (mean; at most 12) against 8.83 (at most 14), under the
+# 3.41 N follower force 8.04 (at most 24) against 8.42 (at most 30), in float32 6.77 against 7.07.
+# A step that overshoots is still cut by the search on the merit.
+_DT_GROWTH = (2.0, 100.0)
+
+
+class PTCState(eqx.Module):
+    residual: Float[Array, " n"]
+    merit: Float[Array, ""]
+    jacobian: Float[Array, "n n"]
+    weights: Float[Array, " n"]
+    dt: Float[Array, ""]
+    step: Int[Array, ""]
+    escapes: Int[Array, ""]
+    # Set by an escape, cleared once the stiffness is no longer indefinite: until then a small
+    # residual is not convergence (see ``terminate``).
+    escaping: Bool[Array, ""]
+    eig: Float[Array, ""]
+    eigvals: Float[Array, " n"]
+    eigvecs: Float[Array, "n n"]
+    escape_dy: Float[Array, " n"]
+    # Non-conservative generalised force at ``y`` (scaled), frozen for the merit of the next
+    # step (``frozen_work``).
+    drive: Float[Array, " n"]
+    code: Int[Array, ""]
+
+
+def _moved(args, y, dy):
+    """The iterate after the step ``dy``: ``args.moved(y, dy)`` where the problem has it (a
+    retraction that agrees with ``y + dy`` to first order; see
+    :meth:`pacjax._statics.problem.ScaledProblem.moved`), else ``y + dy``."""
+    return args.moved(y, dy) if hasattr(args, "moved") else y + dy
+
+
+def max_abs(x):
+    return jnp.max(jnp.abs(x))
+
+
+def stiffness_modes(jac, weights, size, tol):
+    """Eigen-decomposition of ``K = diag(w) J diag(1/w)`` symmetrised, and an escape step.
+
+    With ``w = sqrt(d) sigma`` the matrix ``K`` is ``D^-1/2 (dF/dq) D^-1/2``: the stiffness
+    relative to the elastic stiffness, whose eigenvalue signs are those of the Hessian. The
+    escape step (in ``y``) follows every direction of negative curvature at once, so a saddle
+    with several unstable modes (one per segment of a robot) is left in one go.
+    """
+    k = (weights[:, None] * jac) / weights[None, :]
+    eigvals, eigvecs = _linalg.eigh(0.5 * (k + k.T))
+    unstable = (eigvals < -tol).at[0].set(True)
+    dy = (eigvecs @ jnp.where(unstable, 1.0, 0.0)) / weights
+    dy = size * dy / jnp.maximum(max_abs(dy), jnp.finfo(dy.dtype).tiny)
+    return eigvals, eigvecs, dy
+
+
+class PseudoTransientContinuation(optx.AbstractRootFinder):
+    """Root finder for ``fn(y, args) -> (r, (merit, weights))``; see the module docstring."""
+
+    rtol: float
+    atol: float
+    norm: Any = max_abs
+    initial_dt: float = 1.0
+    max_dt: float = 1e12
+    escapes: int = 2
+    escape_size: float = 0.05
+    stability_tol: float = 1e-12
+    symmetric: bool = True
+    # When True, ``args.linearise(y) -> (jacobian, (r, aux))`` gives the residual and its
+    # Jacobian together (the structured Hessian of :mod:`pacjax._model.hessian`) instead of jacfwd,
+    # and, for a symmetric (conservative) problem, ``args.energy(y)`` the merit alone.
+    structured: bool = False
+    # Non-conservative problem (``symmetric=False``) split as ``r = grad E - Q``: when True,
+    # ``fn``'s merit is the energy ``E`` of the conservative part, ``args.energy(y)`` gives it
+    # alone and ``args.drive(y)`` gives ``Q``. A step from ``y`` must then not raise
+    # ``E(y') - Q(y) . (y' - y)``, the energy with the non-conservative forces frozen at ``y``
+    # (its gradient at ``y`` is ``r``). When False the merit is ``|r|^2 / 2``.
+    frozen_work: bool = False
+
+    def init(self, fn, y, args, options, f_struct, aux_struct, tags):
+        del fn, args, options, aux_struct, tags
+        n = y.shape[0]
+        dtype = y.dtype
+        return PTCState(
+            residual=jnp.full(f_struct.shape, jnp.inf, dtype),
+            merit=jnp.asarray(jnp.inf, dtype),
+            jacobian=jnp.eye(n, dtype=dtype),
+            weights=jnp.ones(n, dtype),
+            dt=jnp.asarray(self.initial_dt, dtype),
+            step=jnp.asarray(0),
+            escapes=jnp.asarray(0),
+            escaping=jnp.asarray(False),
+            eig=jnp.asarray(0.0, dtype),
+            eigvals=jnp.ones(n, dtype),
+            eigvecs=jnp.eye(n, dtype=dtype),
+            escape_dy=jnp.zeros(n, dtype),
+            drive=jnp.zeros(n, dtype),
+            code=jnp.asarray(SUCCESS),
+        )
+
+    def _converged(self, r) -> Bool[Array, ""]:
+        return max_abs(r) <= self.atol
+
+    def _wants_escape(self, state: PTCState) -> Bool[Array, ""]:
+        return (
+            self._converged(state.residual)
+            & (state.eig < -self.stability_tol)
+            & (state.escapes < self.escapes)
+        )
+
+    def step(self, fn, y, args, options, state: PTCState, tags):
+        del options, tags
+        dtype = y.dtype
+        eye = jnp.eye(y.shape[0], dtype=dtype)
+        eps = jnp.finfo(dtype).eps
+        first = state.step == 0
+        escape = self._wants_escape(state) & ~first
+        # Where the stiffness is indefinite (a saddle or a maximum nearby) the step must still
+        # go downhill and must not be drawn to the saddle.
+        if self.symmetric:
+            # Conservative scene: K is the scaled Hessian. Continuation step with |lambda|
+            # ("saddle-free" Newton): full Newton along stable modes, descent along the others.
+            w = state.weights
+            rz = state.eigvecs.T @ (w * state.residual)
+            gain = 1.0 / (jnp.abs(state.eigvals) + 1.0 / state.dt)
+            newton = -(state.eigvecs @ (gain * rz)) / w
+        else:
+            # Non-conservative loads (follower forces, dead moments in 3D): J is not symmetric.
+            # Far from a solution, shift it by enough to dominate the negative curvature of its
+            # symmetric part (a short stretch of the flow). That shift caps dt, so near a
+            # solution whose symmetric part is indefinite (a dead moment bending a twistable rod
+            # past ~2 rad) the capped steps creep; there (scaled residual below
+            # ``_NEWTON_NEAR``, forces 1 % of the elastic scale) the plain Newton step is tried
+            # first and taken when it halves the residual (one more residual evaluation per
+            # such step). Far away it is not: from a straight PCC/PAC segment it jumps to the
+            # spurious polar equilibrium (phi along the moment, no bending).
+            #
+            # Both systems go to LAPACK as one batched factorisation. Two independent solves
+            # are two custom calls that XLA:CPU may run at once, and jaxlib 0.10's batched
+            # LAPACK kernels then each wait on sub-tasks queued to the same intra-op thread
+            # pool: with as many such calls as pool threads (2 on a 2-core machine), every
+            # thread waits and the program hangs (seen in gdb: both in LuDecompositionKernel ->
+            # ParallelBatchMap -> BlockingCounter::Wait). pacjax._statics.linalg keeps every call
+            # below the size that takes that path; one call is also cheaper than two.
+            dt_safe = jnp.where(state.eig < 0, jnp.minimum(state.dt, 0.5 / -state.eig), state.dt)
+            matrices = jnp.stack([state.jacobian + eye / dt_safe, state.jacobian])
+            rhs = jnp.broadcast_to(-state.residual[:, None], (2, y.shape[0], 1))
+            flow, full = _linalg.solve(matrices, rhs)[..., 0]
+
+            near = max_abs(state.residual) <= _NEWTON_NEAR
+            if not self.frozen_work:
+                near = near & (state.eig < 0)
+            # (Under vmap a cond runs both branches: the trial is evaluated for every row.)
+            r_newton, _ = fn(_moved(args, y, full), args)
+            took_newton = near & jnp.all(jnp.isfinite(full)) & jnp.all(jnp.isfinite(r_newton))
+            took_newton = took_newton & (max_abs(r_newton) <= 0.5 * max_abs(state.residual))
+            took_newton = took_newton & ~first & ~escape
+            newton = jnp.where(took_newton, full, flow)
+        delta = jnp.where(first, 0.0, jnp.where(escape, state.escape_dy, newton))
+
+        def descends(merit):
+            slack = 64 * eps * (jnp.abs(state.merit) + jnp.abs(merit))
+            return jnp.isfinite(merit) & (merit <= state.merit + slack)
+
+        # Backtracking on the continuation step, no Jacobian: every trial length is checked on
+        # the merit alone, which for a conservative scene is the energy without its gradient
+        # (about half the cost of the residual; the residual comes with the Jacobian at the
+        # accepted point). Near a solution the merit's change is below its rounding, and a
+        # rise there says nothing: a full step whose predicted decrease (the merit's slope
+        # along it; its gradient in y is w^2 r, with w = sqrt(d) sigma) is within the rounding
+        # of the merit's terms (bounded by the elastic energy w^2 y^2 beside the merit) is taken.
+        frozen = self.frozen_work and not self.symmetric
+        if self.structured and self.symmetric:
+            merit_only = args.energy
+        elif frozen:
+
+            def merit_only(y_):
+                return args.energy(y_) - jnp.dot(state.drive, y_ - y)
+        else:
+
+            def merit_only(y_):
+                return fn(y_, args)[1][0]
+
+        if self.symmetric or self.frozen_work:
+            slope = jnp.dot(state.weights**2 * state.residual, delta)
+            scale = jnp.abs(state.merit) + jnp.sum((state.weights * y) ** 2)
+            rounding = (slope <= 0) & (-slope <= 64 * eps * scale)
+        else:
+            # The merit |r|^2 / 2 is a sum of squares: its rounding is relative to itself.
+            # Its slope along the step is not needed: the search halves the step.
+            slope = jnp.asarray(jnp.nan, dtype)
+            rounding = False
+
+        def shorter(alpha, merit):
+            # The minimiser of the quadratic through the merit and its slope at 0 and the merit
+            # at alpha, within [alpha / 10, alpha / 2] (Nocedal and Wright, section 3.5); half
+            # the step where that quadratic has no minimum. Under vmap the search runs as long
+            # as its slowest row, and the rows that overshoot do so by 8-16x (the paper's
+            # robot, third step, where dt has grown to 20 against a soft mode): halving took
+            # them 3-4 trials, the quadratic mostly 1.
+            curv = merit - state.merit - slope * alpha
+            fit = (curv > 0) & (slope < 0)
+            guess = -slope * alpha**2 / (2.0 * jnp.where(fit, curv, 1.0))
+            guess = jnp.where(fit & jnp.isfinite(guess), guess, 0.5 * alpha)
+            return jnp.clip(guess, 0.1 * alpha, 0.5 * alpha)
+
+        def search_cond(carry):
+            alpha, _, ok = carry
+            return ~ok & (alpha > _MIN_ALPHA)
+
+        def search_body(carry):
+            alpha, merit, _ = carry
+            alpha = shorter(alpha, merit)
+            merit = merit_only(_moved(args, y, alpha * delta))
+            return alpha, merit, descends(merit) | first | escape
+
+        m_full = merit_only(_moved(args, y, delta))
+        ok_full = descends(m_full) | rounding | first | escape
+        if not self.symmetric:
+            # A Newton step that halved the residual is taken whatever the merit says: near a
+            # solution of a soft structure the frozen work misses the stiffness of the
+            # follower loads, and the merit of the Newton step can rise.
+            ok_full = ok_full | took_newton
+        alpha, _, ok = jax.lax.while_loop(
+            search_cond, search_body, (jnp.asarray(1.0, dtype), m_full, ok_full)
+        )
+        # No acceptable step even at the smallest length: take the shortest flow step when dt
+        # is already tiny (it is a descent direction), else shrink dt and stay.
+        tiny_dt = state.dt <= _MIN_DT
+        accept = ok | tiny_dt
+        alpha = jnp.where(ok, alpha, _MIN_ALPHA)
+        y_new = _moved(args, y, alpha * delta)
+
+        def with_aux(y_):
+            r, aux = fn(y_, args)
+            return r, (r, aux)
+
+        if self.structured:
+            jac, (r_new, (m_new, weights)) = args.linearise(y_new)
+        else:
+            jac, (r_new, (m_new, weights)) = jax.jacfwd(with_aux, has_aux=True)(y_new)
+        drive = args.drive(y_new) if frozen else state.drive
+        finite = jnp.all(jnp.isfinite(r_new)) & jnp.isfinite(m_new) & jnp.all(jnp.isfinite(jac))
+        accept = first | (accept & finite)
+        ratio = max_abs(state.residual) / jnp.maximum(max_abs(r_new), jnp.finfo(dtype).tiny)
+        grown = jnp.minimum(state.dt * jnp.clip(ratio, *_DT_GROWTH), self.max_dt)
+        dt = jnp.where(
+            escape | first,
+            self.initial_dt,
+            jnp.where(accept & (alpha == 1.0), grown, jnp.where(accept, state.dt, 0.1 * state.dt)),
+        ).astype(dtype)
+
+        def keep(a, b):
+            return jnp.where(accept, a, b)
+
+        jac = keep(jac, state.jacobian)
+        eigvals, eigvecs, escape_dy = stiffness_modes(
+            jac, weights, self.escape_size, self.stability_tol
+        )
+        eig = eigvals[0]
+        code = jnp.where(first & ~finite, NONFINITE, state.code)
+        # Stalled: even at the smallest pseudo-time step no step of any length lowers the merit
+        # (the flow direction is not a descent direction of |r|^2 where the Jacobian of a
+        # non-conservative scene is far from symmetric, or round-off rules at a floor). The
+        # forced shortest steps do not move the iterate: stop, so that a retry can start, instead
+        # of creeping to the step limit (a follower-force row of the paper's robot with
+        # PolynomialCurvature(3) sat at residual 1.4e-2 for 297 of its 300 steps, the other
+        # rows of its batch idle beside it).
+        stalled = tiny_dt & (~ok | ~accept)
+        code = jnp.where(stalled & (code == SUCCESS), STALLED, code)
+        new_state = PTCState(
+            residual=keep(r_new, state.residual),
+            merit=keep(m_new, state.merit),
+            jacobian=jac,
+            weights=weights,
+            dt=dt,
+            step=state.step + 1,
+            escapes=state.escapes + escape.astype(state.escapes.dtype),
+            # A non-conservative problem has no energy that the escape lowered: the
+            # continuation may return to the same point, an attractor of the flow whose
+            # symmetric stiffness is indefinite. There the flag lasts one step (no termination
+            # on the escaped iterate itself); it used to hold such a row to the step limit.
+            escaping=(escape | (state.escaping & self.symmetric)) & (eig < -self.stability_tol),
+            eig=eig,
+            eigvals=eigvals,
+            eigvecs=eigvecs,
+            escape_dy=escape_dy,
+            drive=keep(drive, state.drive),
+            code=code,
+        )
+        return keep(y_new, y), new_state, (keep(m_new, state.merit), weights)
+
+    def terminate(self, fn, y, args, options, state: PTCState, tags):
+        del fn, y, args, options, tags
+        # After an escape the iterate is still near the saddle, and at a loose tolerance its
+        # residual can already be below it (float32 at 1e-4: a saddle with eigenvalue -3e-4
+        # left by 0.05 has a residual ~1.5e-5). It must first reach a stable point: the
+        # saddle-free steps move it away from the saddle geometrically, and the energy, which
+        # the escape lowered below the saddle's, cannot bring it back.
+        done = self._converged(state.residual) & ~self._wants_escape(state) & ~state.escaping
+        failed = state.code != SUCCESS
+        result = optx.RESULTS.where(
+            failed, optx.RESULTS.nonlinear_divergence, optx.RESULTS.successful
+        )
+        return done | failed, result
+
+    def postprocess(self, fn, y, aux, args, options, state, tags, result):
+        del fn, args, options, state, tags, result
+        return y, aux, {}
+
+
+def final_code(state: PTCState, converged) -> Int[Array, ""]:
+    """The :mod:`pacjax._statics.solution` result code after a run."""
+    return jnp.where(
+        converged,
+        SUCCESS,
+        jnp.where(state.code == SUCCESS, MAX_STEPS, state.code),
+    )

@@ -1,0 +1,111 @@
+"""Helpers shared by the ``pacjax`` subcommands (see :mod:`pacjax.cli.main`)."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import sys
+import time
+
+import click
+import equinox as eqx
+import jax
+import numpy as np
+
+import pacjax as pj
+
+__all__ = [
+    "float_or_none",
+    "load_with_controls",
+    "output_dir",
+    "parse_controls",
+    "parse_numbers",
+    "progress",
+    "summary",
+    "timed_solve",
+    "write_json",
+]
+
+
+def timed_solve(scene, controls, **options):
+    start = time.perf_counter()
+    eq = pj.solve_equilibrium(scene, controls, **options)
+    jax.block_until_ready(eq)
+    return eq, time.perf_counter() - start
+
+
+@eqx.filter_jit
+def summary(scene, q, controls):
+    """Tip pose, marker positions and tendon tensions at ``q``, in one compiled call (op by
+    op, these kinematics take seconds)."""
+    tip = pj.tip_pose(scene, q)
+    marker_positions = pj.markers(scene, q) if scene.markers else None
+    tensions = pj.tendon_tensions(scene, q, controls) if scene.n_tendons else None
+    return tip, marker_positions, tensions
+
+
+def progress(total: int, desc: str):
+    from tqdm import tqdm
+
+    # disable=None: no bar when stderr is not a terminal (logs, pipes, tests).
+    return tqdm(
+        total=total, desc=desc, unit="solve", file=sys.stderr, leave=False, ncols=88, disable=None
+    )
+
+
+def float_or_none(x) -> float | None:
+    """A JSON-safe float (NaN and infinities become null)."""
+    value = float(np.asarray(x))
+    return value if math.isfinite(value) else None
+
+
+def output_dir(out: str) -> str:
+    try:
+        os.makedirs(out, exist_ok=True)
+    except OSError as err:
+        raise click.ClickException(f"cannot create output directory {out!r}: {err}") from None
+    return out
+
+
+def parse_numbers(text: str, option: str) -> list[float]:
+    """Comma-separated numbers of a command-line option; a one-line user error otherwise."""
+    try:
+        return [float(v) for v in text.replace(" ", "").split(",") if v != ""]
+    except ValueError:
+        raise click.ClickException(
+            f"{option} must be comma-separated numbers, got {text!r}"
+        ) from None
+
+
+def parse_controls(text: str, n_tendons: int) -> np.ndarray:
+    values = parse_numbers(text, "--controls")
+    if len(values) != n_tendons:
+        raise click.ClickException(
+            f"--controls has {len(values)} value(s) but the scene has {n_tendons} tendon(s)"
+        )
+    return np.asarray(values)
+
+
+def load_with_controls(scene_file: str, controls: str | None):
+    """``(scene, controls, extra)`` of a scene file: ``--controls`` if given, else the file's
+    ``controls``, else zeros. A malformed file or ``--controls`` is a one-line user error."""
+    from ..io.scenefile import load_scene
+
+    try:
+        scene, file_controls, extra = load_scene(scene_file)
+    except (ValueError, OSError) as err:
+        raise click.ClickException(str(err)) from None
+    if controls is not None:
+        u = parse_controls(controls, scene.n_tendons)
+    elif file_controls is not None:
+        u = file_controls
+    else:
+        u = np.zeros(scene.n_tendons)
+    return scene, u, extra
+
+
+def write_json(path: str, result: dict, indent: int | None = None) -> None:
+    with open(path, "w", encoding="utf-8") as f:
+        json.dump(result, f, indent=indent)
+        f.write("\n")

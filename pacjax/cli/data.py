@@ -1,0 +1,265 @@
+"""``pacjax fit`` and ``pacjax inverse``: measured or wanted poses in (see
+:mod:`pacjax.cli.main`)."""
+
+from __future__ import annotations
+
+import os
+import sys
+import time
+
+import click
+import jax
+import numpy as np
+
+import pacjax as pj
+
+from .common import output_dir
+
+
+# ------------------------------------------------------------------------------ fit
+def _names(text: str) -> tuple[str, ...]:
+    return tuple(x.strip() for x in text.split(",") if x.strip())
+
+
+@click.command()
+@click.argument("scene_file", type=click.Path(exists=True, dir_okay=False))
+@click.argument("data_file", type=click.Path(exists=True, dir_okay=False))
+@click.option(
+    "--params",
+    default="bending_stiffness,mocap_transform",
+    show_default=True,
+    help="Comma-separated parameters to fit (see pacjax.identify).",
+)
+@click.option("--per-segment", default="", help="Parameters fitted per segment / tendon.")
+@click.option(
+    "--holdout",
+    default=0.2,
+    show_default=True,
+    type=click.FloatRange(0.0, 0.9),
+    help="Fraction of frames held out for validation (0: none).",
+)
+@click.option("--loss", type=click.Choice(["l2", "huber"]), default="l2", show_default=True)
+@click.option("--noise", default=1e-3, show_default=True, help="Marker noise scale, m.")
+@click.option("--max-iterations", default=50, show_default=True, type=click.IntRange(min=0))
+@click.option("--seed", default=0, show_default=True, help="Seed of the held-out split.")
+@click.option(
+    "--out",
+    default=".",
+    show_default=True,
+    type=click.Path(file_okay=False),
+    help="Directory for the fitted scene, the report and the plots.",
+)
+@click.option("--no-plot", is_flag=True, help="Skip the figures.")
+def fit(
+    scene_file,
+    data_file,
+    params,
+    per_segment,
+    holdout,
+    loss,
+    noise,
+    max_iterations,
+    seed,
+    out,
+    no_plot,
+):
+    """Fit a scene's parameters to static motion-capture frames (pacjax mocap CSV).
+
+    Writes <name>_fitted.toml, <name>_fit.json, <name>_fit.md and, unless --no-plot, the loss
+    curve, predicted vs measured backbones and an error histogram (PNG).
+    """
+    from ..io.mocapfile import load_mocap
+    from ..io.scenefile import load_scene, save_scene
+
+    try:
+        scene, _, extra = load_scene(scene_file)
+    except (ValueError, OSError) as err:
+        raise click.ClickException(str(err)) from None
+    with open(data_file, encoding="utf-8-sig") as f:
+        if f.readline().startswith("Format Version"):
+            raise click.ClickException(
+                f"{data_file} is a Motive export: attach the robot's commands and pick static "
+                "frames with pacjax.io.mocapfile.motive_dataset, then save_mocap it"
+            )
+    try:
+        data = load_mocap(data_file)
+        fitted, report = pj.identify(
+            scene,
+            data,
+            _names(params),
+            per_segment=_names(per_segment),
+            holdout=holdout,
+            seed=seed,
+            loss=loss,
+            noise=noise,
+            max_iterations=max_iterations,
+            solver_options=extra["solver"],
+        )
+    except (ValueError, TypeError) as err:
+        raise click.ClickException(str(err)) from None
+    out = output_dir(out)
+    name = extra["name"]
+    paths = {
+        "scene": os.path.join(out, f"{name}_fitted.toml"),
+        "json": os.path.join(out, f"{name}_fit.json"),
+        "md": os.path.join(out, f"{name}_fit.md"),
+    }
+    save_scene(paths["scene"], fitted, name=f"{name} (fitted)")
+    report.to_json(paths["json"])
+    with open(paths["md"], "w", encoding="utf-8") as f:
+        f.write(report.to_markdown())
+    if not no_plot:
+        from ..plots import fit as fitplots
+
+        paths["loss"] = os.path.join(out, f"{name}_fit_loss.png")
+        paths["backbones"] = os.path.join(out, f"{name}_fit_backbones.png")
+        paths["errors"] = os.path.join(out, f"{name}_fit_errors.png")
+        fitplots.plot_loss(report, paths["loss"])
+        fitplots.plot_backbones(fitted, report, paths["backbones"])
+        fitplots.plot_error_histogram(report, paths["errors"])
+    click.echo(f"{name}: {report.message}; {report.iterations} iterations, {report.time_s:.1f} s")
+    for pname, p in report.parameters.items():
+        for label, value, std in zip(p["labels"], p["value"], p["std"], strict=True):
+            sd = "" if std is None else f" +- {std:.3g}"
+            click.echo(f"  {pname}{label} = {value:.6g}{sd} {p['unit']}")
+    for label, errors in (("train", report.train), ("held-out", report.validation)):
+        if errors is None:
+            continue
+        failed = int((~errors.converged).sum())
+        note = f", {failed} not converged: not in the RMSE" if failed else ""
+        click.echo(f"{label} RMSE {errors.rmse_mm:.3f} mm ({len(errors.q)} frames{note})")
+    for path in paths.values():
+        click.echo(f"wrote {path}")
+
+
+# ------------------------------------------------------------------------------ inverse
+def _read_targets(path: str) -> np.ndarray:
+    """Target tip positions (m) from a CSV file: one ``x,y,z`` row per target, an optional
+    header line (any non-numeric first line), ``#`` comments."""
+    rows = []
+    with open(path, encoding="utf-8") as f:
+        lines = [ln.strip() for ln in f if ln.strip() and not ln.lstrip().startswith("#")]
+    for i, line in enumerate(lines):
+        cells = [c.strip() for c in line.split(",")]
+        try:
+            values = [float(c) for c in cells]
+        except ValueError:
+            if i == 0:
+                continue  # header
+            raise click.ClickException(f"{path}: row {i + 1} is not numbers: {line!r}") from None
+        if len(values) != 3:
+            raise click.ClickException(
+                f"{path}: row {i + 1} has {len(values)} value(s); expected x,y,z in metres"
+            )
+        rows.append(values)
+    if not rows:
+        raise click.ClickException(f"{path}: no targets (expected rows of x,y,z in metres)")
+    targets = np.asarray(rows)
+    if not np.all(np.isfinite(targets)):
+        raise click.ClickException(f"{path}: targets must be finite numbers")
+    return targets
+
+
+@click.command()
+@click.argument("scene_file", type=click.Path(exists=True, dir_okay=False))
+@click.argument("targets_file", type=click.Path(exists=True, dir_okay=False))
+@click.option(
+    "--out",
+    default=".",
+    show_default=True,
+    type=click.Path(file_okay=False),
+    help="Directory for <name>_commands.csv and <name>_inverse.png.",
+)
+@click.option(
+    "--independent",
+    is_flag=True,
+    help="Solve every target from fresh starts (default: the rows are a path, each warm-started "
+    "from the previous one).",
+)
+@click.option(
+    "--tol",
+    default=1e-4,
+    show_default=True,
+    type=click.FloatRange(min=0, min_open=True),
+    help="Reached threshold on the tip position error, m.",
+)
+@click.option("--upper", type=click.FloatRange(min=0, min_open=True), help="Largest command (m).")
+@click.option(
+    "--max-tension", type=click.FloatRange(min=0, min_open=True), help="Tension limit, N."
+)
+@click.option("--no-plot", is_flag=True, help="Skip the figure.")
+def inverse(
+    scene_file: str,
+    targets_file: str,
+    out: str,
+    independent: bool,
+    tol: float,
+    upper: float | None,
+    max_tension: float | None,
+    no_plot: bool,
+):
+    """Tendon commands that put the tip of a TOML scene on the targets of a CSV file (x,y,z in
+    metres per row). Exits with status 3 when a target was not reached."""
+    from ..io.scenefile import load_scene
+
+    try:
+        scene, _, extra = load_scene(scene_file)
+    except (ValueError, OSError) as err:
+        raise click.ClickException(str(err)) from None
+    targets = _read_targets(targets_file)
+    out = output_dir(out)
+    name = extra["name"]
+    options = dict(reached_tol=tol, upper=upper, max_tension=max_tension)
+    options["solver_options"] = extra["solver"] or None
+    start = time.perf_counter()
+    try:
+        if independent:
+            results = [pj.inverse_statics(scene, t, **options) for t in targets]
+            result = jax.tree_util.tree_map(lambda *xs: np.stack(xs), *results)
+        else:
+            result = pj.track(scene, targets, **options).result
+    except ValueError as err:
+        raise click.ClickException(f"{scene_file}: {err}") from None
+    seconds = time.perf_counter() - start
+
+    controls = np.asarray(result.controls)
+    reached = np.asarray(result.reached)
+    csv_path = os.path.join(out, f"{name}_commands.csv")
+    header = (
+        ["target_x", "target_y", "target_z", "reached", "error_m", "tip_x", "tip_y", "tip_z"]
+        + [f"u{i}" for i in range(scene.n_tendons)]
+        + [f"tension{i}" for i in range(scene.n_tendons)]
+        + ["iterations"]
+    )
+    with open(csv_path, "w", encoding="utf-8") as f:
+        f.write("# pacjax inverse: commands u (m pull-in, or N tension), tensions N, lengths m\n")
+        f.write(",".join(header) + "\n")
+        for i in range(len(targets)):
+            row = list(targets[i]) + [int(reached[i]), float(result.error[i])]
+            row += list(np.asarray(result.position[i])) + list(controls[i])
+            row += list(np.asarray(result.tensions[i])) + [int(result.iterations[i])]
+            f.write(",".join(f"{v:.9g}" if isinstance(v, float) else str(v) for v in row) + "\n")
+    jumps = np.abs(np.diff(controls, axis=0)).max() if len(controls) > 1 else 0.0
+    click.echo(
+        f"{name}: {int(reached.sum())}/{len(targets)} targets reached within {1e3 * tol:g} mm, "
+        f"largest error {1e3 * float(np.max(result.error)):.3g} mm, {seconds:.1f} s"
+    )
+    click.echo(f"largest command change between neighbouring rows: {1e3 * jumps:.2f} mm")
+    click.echo(f"wrote {csv_path}")
+    if not no_plot:
+        from ..plots import equilibria as plots
+
+        png_path = os.path.join(out, f"{name}_inverse.png")
+        shown = np.unique(np.linspace(0, len(targets) - 1, min(len(targets), 6)).astype(int))
+        cases = {f"target {i + 1}": np.asarray(result.q[i]) for i in shown}
+        plots.plot_equilibria(
+            scene,
+            cases,
+            png_path,
+            title=f"{name}: reached backbones ({int(reached.sum())}/{len(targets)} reached)",
+            markers=False,
+            targets={"target": targets, "reached tip": np.asarray(result.position)},
+        )
+        click.echo(f"wrote {png_path}")
+    if not reached.all():
+        sys.exit(3)

@@ -1,0 +1,488 @@
+"""Motion-capture files: the pacjax static-frame CSV, and OptiTrack Motive CSV exports.
+
+The pacjax mocap CSV
+--------------------
+One row per static frame. Header lines start with ``#`` and hold ``key = JSON value``; then one
+line of column names, then the data. SI units: metres, kilograms, newtons, seconds. An empty
+cell or ``nan`` is a missing value (only allowed for markers and orientations: the marker is
+masked in that frame, the frame is kept)::
+
+    # pacjax mocap 1
+    # sites = [[0, 0.5], [0, 1.0], [1, 1.0, [0.0, 0.012, 0.0]]]
+    # payload_site = [1, 1.0]           (optional; default: the tip)
+    # force_site = [1, 1.0]             (optional; default: the tip)
+    # force_follower = false            (optional)
+    # length_unit = "m"                 (optional: "m" (default), "mm" or "cm")
+    frame,time,u0,u1,u2,payload_mass,m0_x,m0_y,m0_z,m1_x,m1_y,m1_z,m2_x,m2_y,m2_z
+    0,0.0,0.01,0.0,0.0,0.2,0.001,-0.002,-0.068,...
+
+Columns:
+
+- ``u0 .. u{n-1}`` (required): controls, one per tendon in the scene's order: pull-in (m) of a
+  length-mode tendon (0 = rest length, positive = shortened), or tension (N) of a tension-mode
+  tendon.
+- ``m{j}_x, m{j}_y, m{j}_z`` (required for each site j): marker position in the motion-capture
+  frame. ``sites`` lists, per marker, ``[segment, s]`` or ``[segment, s, [ox, oy, oz]]``:
+  segment index from 0 at the base, ``s`` in [0, 1] along it, and the marker's stand-off from
+  the backbone in the local cross-section frame (m).
+- ``m{j}_qw, m{j}_qx, m{j}_qy, m{j}_qz`` (optional, all markers or none): orientation at site j
+  as a unit quaternion (mocap frame; e.g. a rigid body at the tip).
+- ``payload_mass`` (optional): kg hanging at ``payload_site``.
+- ``force_x, force_y, force_z`` (optional): N at ``force_site``; world frame (the mocap frame's
+  axes are not used: the force is in the scene's world frame) or, with ``force_follower``, the
+  local cross-section frame.
+- ``frame``, ``time`` (optional): labels, not used by the fit.
+
+Any other column is an error (so that a typo does not silently drop data).
+
+OptiTrack Motive CSV
+--------------------
+:func:`read_motive_csv` reads Motive's CSV export (format 1.2x): a metadata line (``Format
+Version``, ``Length Units``, ``Rotation Type``, ...), a blank line, the ``Type`` / ``Name`` /
+``ID`` rows, a row naming each column group (``Rotation``, ``Position``, ``Mean Marker Error``,
+``Marker Quality``) and the ``Frame, Time (Seconds), X, Y, Z, ...`` row, then one row per
+captured frame. Rigid bodies give a position and a quaternion, markers (``Marker``, ``Rigid Body
+Marker``) a position; lengths are converted to metres. Pick static frames and attach controls
+with :meth:`pacjax.MocapDataset.from_time_series` (see :func:`motive_dataset`).
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .._identify.dataset import MocapDataset
+
+__all__ = [
+    "load_mocap",
+    "save_mocap",
+    "read_motive_csv",
+    "motive_dataset",
+    "MotiveTake",
+    "quaternion_to_matrix",
+    "matrix_to_quaternion",
+]
+
+_UNITS = {"m": 1.0, "mm": 1e-3, "cm": 1e-2}
+_HEADER_KEYS = ("sites", "payload_site", "force_site", "force_follower", "length_unit")
+
+
+def quaternion_to_matrix(q) -> np.ndarray:
+    """Rotation matrices (..., 3, 3) from quaternions (..., 4) ordered ``(w, x, y, z)``."""
+    q = np.asarray(q, float)
+    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    w, x, y, z = np.moveaxis(q, -1, 0)
+    return np.stack(
+        [
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
+        ],
+        -2,
+    )
+
+
+def matrix_to_quaternion(r) -> np.ndarray:
+    """Quaternions (..., 4) ``(w, x, y, z)`` with ``w >= 0`` from rotation matrices."""
+    r = np.asarray(r, float)
+    flat = r.reshape(-1, 3, 3)
+    out = np.empty((len(flat), 4))
+    for k, m in enumerate(flat):
+        # Symmetric 4x4 (Bar-Itzhack): the quaternion is its dominant eigenvector.
+        k4 = (
+            np.array(
+                [
+                    [
+                        m[0, 0] - m[1, 1] - m[2, 2],
+                        m[1, 0] + m[0, 1],
+                        m[2, 0] + m[0, 2],
+                        m[2, 1] - m[1, 2],
+                    ],
+                    [
+                        m[1, 0] + m[0, 1],
+                        m[1, 1] - m[0, 0] - m[2, 2],
+                        m[2, 1] + m[1, 2],
+                        m[0, 2] - m[2, 0],
+                    ],
+                    [
+                        m[2, 0] + m[0, 2],
+                        m[2, 1] + m[1, 2],
+                        m[2, 2] - m[0, 0] - m[1, 1],
+                        m[1, 0] - m[0, 1],
+                    ],
+                    [
+                        m[2, 1] - m[1, 2],
+                        m[0, 2] - m[2, 0],
+                        m[1, 0] - m[0, 1],
+                        m[0, 0] + m[1, 1] + m[2, 2],
+                    ],
+                ]
+            )
+            / 3.0
+        )
+        if not np.all(np.isfinite(k4)):
+            out[k] = np.nan
+            continue
+        _, vec = np.linalg.eigh(k4)
+        x, y, z, w = vec[:, -1]
+        out[k] = np.array([w, x, y, z]) * (1.0 if w >= 0 else -1.0)
+    return out.reshape(r.shape[:-2] + (4,))
+
+
+# ------------------------------------------------------------------------------ pacjax CSV
+def save_mocap(path, dataset: MocapDataset) -> None:
+    """Write ``dataset`` in the pacjax mocap CSV format (see the module docstring)."""
+    d = dataset
+    header = {
+        "sites": [[seg, s] if not any(off) else [seg, s, list(off)] for seg, s, off in d.sites]
+    }
+    if d.payload_site is not None:
+        header["payload_site"] = list(d.payload_site)
+    if d.force is not None:
+        if d.force_site is not None:
+            header["force_site"] = list(d.force_site)
+        header["force_follower"] = d.force_follower
+    columns = ["frame"] + (["time"] if d.time is not None else [])
+    columns += [f"u{i}" for i in range(d.n_controls)]
+    blocks = [np.arange(d.n_frames)[:, None]] + ([d.time[:, None]] if d.time is not None else [])
+    blocks.append(d.controls)
+    if d.payload_mass is not None:
+        columns.append("payload_mass")
+        blocks.append(d.payload_mass[:, None])
+    if d.force is not None:
+        columns += ["force_x", "force_y", "force_z"]
+        blocks.append(d.force)
+    for j in range(d.n_markers):
+        columns += [f"m{j}_{a}" for a in "xyz"]
+    blocks.append(d.markers.reshape(d.n_frames, -1))
+    if d.orientations is not None:
+        for j in range(d.n_markers):
+            columns += [f"m{j}_q{a}" for a in "wxyz"]
+        blocks.append(matrix_to_quaternion(d.orientations).reshape(d.n_frames, -1))
+    table = np.concatenate(blocks, axis=1)
+    with open(os.fspath(path), "w", encoding="utf-8", newline="") as f:
+        f.write("# pacjax mocap 1\n")
+        for key, value in header.items():
+            f.write(f"# {key} = {json.dumps(value)}\n")
+        writer = csv.writer(f)
+        writer.writerow(columns)
+        for k, row in enumerate(table):
+            cells = ["" if not np.isfinite(v) else repr(float(v)) for v in row]
+            cells[0] = str(k)
+            writer.writerow(cells)
+
+
+def _cell(text: str, where: str) -> float:
+    text = text.strip()
+    if text == "" or text.lower() == "nan":
+        return np.nan
+    try:
+        return float(text)
+    except ValueError:
+        raise ValueError(f"{where}: {text!r} is not a number") from None
+
+
+def load_mocap(path) -> MocapDataset:
+    """Read a pacjax mocap CSV (see the module docstring); errors name the file and column."""
+    path = os.fspath(path)
+    header: dict = {}
+    with open(path, encoding="utf-8", newline="") as f:
+        lines = f.read().splitlines()
+    body_start = 0
+    for k, line in enumerate(lines):
+        if not line.startswith("#"):
+            body_start = k
+            break
+        text = line[1:].strip()
+        if "=" not in text:
+            continue
+        key, value = (x.strip() for x in text.split("=", 1))
+        if key not in _HEADER_KEYS:
+            raise ValueError(
+                f"{path}: unknown header key {key!r} (known: {', '.join(_HEADER_KEYS)})"
+            )
+        try:
+            header[key] = json.loads(value)
+        except json.JSONDecodeError:
+            raise ValueError(f"{path}: header {key!r} is not valid JSON: {value!r}") from None
+    else:
+        raise ValueError(f"{path}: no column line after the header")
+    if "sites" not in header:
+        raise ValueError(f"{path}: the header must give the marker sites ('# sites = [[0, 1.0]]')")
+    rows = list(csv.reader(lines[body_start:]))
+    columns = [c.strip() for c in rows[0]]
+    data = [r for r in rows[1:] if any(c.strip() for c in r)]
+    if not data:
+        raise ValueError(f"{path}: no data rows")
+    for k, r in enumerate(data):
+        if len(r) != len(columns):
+            raise ValueError(
+                f"{path}: data row {k} has {len(r)} cells, the column line has {len(columns)}"
+            )
+    unit = header.get("length_unit", "m")
+    if unit not in _UNITS:
+        raise ValueError(f"{path}: length_unit must be one of {list(_UNITS)}, got {unit!r}")
+    scale = _UNITS[unit]
+    n_markers = len(header["sites"])
+    col = {name: i for i, name in enumerate(columns)}
+    if len(col) != len(columns):
+        raise ValueError(f"{path}: duplicate column names")
+
+    def get(name: str) -> np.ndarray:
+        return np.array(
+            [_cell(r[col[name]], f"{path}, column {name}, row {k}") for k, r in enumerate(data)]
+        )
+
+    n_u = 0
+    while f"u{n_u}" in col:
+        n_u += 1
+    if n_u == 0:
+        raise ValueError(f"{path}: no control columns (u0, u1, ...)")
+    known = {"frame", "time", "payload_mass", "force_x", "force_y", "force_z"}
+    known |= {f"u{i}" for i in range(n_u)}
+    known |= {f"m{j}_{a}" for j in range(n_markers) for a in "xyz"}
+    known |= {f"m{j}_q{a}" for j in range(n_markers) for a in "wxyz"}
+    unknown = [c for c in columns if c not in known]
+    if unknown:
+        raise ValueError(
+            f"{path}: unknown column(s) {unknown} (controls u0..u{n_u - 1}, markers m0..m"
+            f"{n_markers - 1} from the header's sites; see pacjax.io.mocapfile)"
+        )
+    missing = [f"m{j}_{a}" for j in range(n_markers) for a in "xyz" if f"m{j}_{a}" not in col]
+    if missing:
+        raise ValueError(f"{path}: missing marker column(s) {missing[:6]} for the header's sites")
+    controls = np.stack([get(f"u{i}") for i in range(n_u)], 1)
+    if np.any(np.isnan(controls)):
+        raise ValueError(f"{path}: controls (u columns) must not be empty or NaN")
+    markers = (
+        np.stack([np.stack([get(f"m{j}_{a}") for a in "xyz"], 1) for j in range(n_markers)], 1)
+        * scale
+    )
+    payload = get("payload_mass") if "payload_mass" in col else None
+    force = None
+    force_cols = [c for c in ("force_x", "force_y", "force_z") if c in col]
+    if force_cols:
+        if len(force_cols) != 3:
+            raise ValueError(f"{path}: force needs all of force_x, force_y, force_z")
+        force = np.stack([get(c) for c in ("force_x", "force_y", "force_z")], 1)
+    quat_cols = [f"m{j}_q{a}" for j in range(n_markers) for a in "wxyz"]
+    orientations = None
+    if any(c in col for c in quat_cols):
+        absent = [c for c in quat_cols if c not in col]
+        if absent:
+            raise ValueError(f"{path}: orientation columns incomplete, missing {absent[:4]}")
+        quats = np.stack(
+            [np.stack([get(f"m{j}_q{a}") for a in "wxyz"], 1) for j in range(n_markers)], 1
+        )
+        orientations = quaternion_to_matrix(quats)
+    try:
+        return MocapDataset.from_arrays(
+            controls,
+            markers,
+            [tuple(s) if not isinstance(s, list) else tuple(s) for s in header["sites"]],
+            payload,
+            payload_site=header.get("payload_site"),
+            force=force,
+            force_site=header.get("force_site"),
+            force_follower=bool(header.get("force_follower", False)),
+            orientations=orientations,
+            time=get("time") if "time" in col else None,
+        )
+    except ValueError as err:
+        raise ValueError(f"{path}: {err}") from None
+
+
+# ------------------------------------------------------------------------------ Motive CSV
+_MOTIVE_UNITS = {"meters": 1.0, "millimeters": 1e-3, "centimeters": 1e-2}
+
+
+@dataclass
+class MotiveTake:
+    """The tracks of one Motive take, in metres and seconds.
+
+    Attributes:
+        time: (samples,) s.
+        frame: (samples,) Motive frame numbers.
+        markers: name -> (samples, 3) positions (m), NaN where not tracked.
+        rigid_bodies: name -> (positions (samples, 3) m, rotations (samples, 3, 3)).
+        metadata: the first line's key/value pairs (``Capture Frame Rate``, ...).
+    """
+
+    time: np.ndarray
+    frame: np.ndarray
+    markers: dict = field(default_factory=dict)
+    rigid_bodies: dict = field(default_factory=dict)
+    metadata: dict = field(default_factory=dict)
+
+    def positions(self, names) -> np.ndarray:
+        """(samples, len(names), 3): markers, or rigid bodies' positions, by name."""
+        out = []
+        for name in names:
+            if name in self.markers:
+                out.append(self.markers[name])
+            elif name in self.rigid_bodies:
+                out.append(self.rigid_bodies[name][0])
+            else:
+                known = sorted(self.markers) + sorted(self.rigid_bodies)
+                raise ValueError(f"no marker or rigid body named {name!r} in the take ({known})")
+        return np.stack(out, 1)
+
+
+def read_motive_csv(path, length_unit: str | None = None) -> MotiveTake:
+    """Read an OptiTrack Motive CSV export (see the module docstring).
+
+    Args:
+        path: the file.
+        length_unit: ``"meters"``, ``"millimeters"`` or ``"centimeters"`` when the export's
+            header does not say (``Length Units``); overrides nothing the header states.
+    """
+    path = os.fspath(path)
+    with open(path, encoding="utf-8-sig", newline="") as f:
+        rows = list(csv.reader(f))
+    if not rows or not rows[0] or rows[0][0].strip() != "Format Version":
+        raise ValueError(f"{path}: not a Motive CSV export (first cell must be 'Format Version')")
+    meta_cells = [c.strip() for c in rows[0]]
+    metadata = {meta_cells[k]: meta_cells[k + 1] for k in range(0, len(meta_cells) - 1, 2)}
+
+    def find(label: str, column: int) -> int:
+        for k, r in enumerate(rows[:12]):
+            if len(r) > column and r[column].strip() == label:
+                return k
+        raise ValueError(f"{path}: Motive header row {label!r} not found")
+
+    type_row, name_row = rows[find("Type", 1)], rows[find("Name", 1)]
+    head = find("Frame", 0)
+    group_row, axis_row = rows[head - 1], rows[head]
+    unit = metadata.get("Length Units", length_unit)
+    if unit is None:
+        raise ValueError(f"{path}: the export does not state its Length Units; pass length_unit=")
+    if unit.lower() not in _MOTIVE_UNITS:
+        raise ValueError(f"{path}: unknown Length Units {unit!r} (known: {list(_MOTIVE_UNITS)})")
+    scale = _MOTIVE_UNITS[unit.lower()]
+    rotation_type = metadata.get("Rotation Type", "Quaternion")
+    data = [r for r in rows[head + 1 :] if any(c.strip() for c in r)]
+    if not data:
+        raise ValueError(f"{path}: no data rows")
+    width = len(axis_row)
+    table = np.full((len(data), width), np.nan)
+    for k, r in enumerate(data):
+        for c in range(min(width, len(r))):
+            table[k, c] = _cell(r[c], f"{path}, data row {k}, column {c}")
+    if np.any(~np.isfinite(table[:, 1])):
+        raise ValueError(f"{path}: the time column has empty cells")
+    # Group columns by (type, name, group).
+    groups: dict[tuple[str, str, str], dict[str, int]] = {}
+    for c in range(2, width):
+        kind = type_row[c].strip() if c < len(type_row) else ""
+        name = name_row[c].strip() if c < len(name_row) else ""
+        group = group_row[c].strip() if c < len(group_row) else ""
+        groups.setdefault((kind, name, group), {})[axis_row[c].strip()] = c
+    markers, bodies = {}, {}
+    for (kind, name, group), axes in groups.items():
+        if group != "Position":
+            continue
+        if not all(a in axes for a in "XYZ"):
+            raise ValueError(f"{path}: {kind} {name!r} position lacks X, Y or Z columns")
+        pos = table[:, [axes["X"], axes["Y"], axes["Z"]]] * scale
+        if kind == "Rigid Body":
+            rot_axes = groups.get((kind, name, "Rotation"))
+            if rot_axes is None:
+                raise ValueError(f"{path}: rigid body {name!r} has no Rotation columns")
+            if rotation_type != "Quaternion":
+                raise ValueError(
+                    f"{path}: Rotation Type {rotation_type!r} is not supported; export rigid "
+                    "bodies with Rotation Type 'Quaternion'"
+                )
+            quat = table[:, [rot_axes["W"], rot_axes["X"], rot_axes["Y"], rot_axes["Z"]]]
+            ok = np.isfinite(quat).all(1)
+            rot = np.full((len(table), 3, 3), np.nan)
+            rot[ok] = quaternion_to_matrix(quat[ok])
+            bodies[name] = (pos, rot)
+        elif kind in ("Marker", "Rigid Body Marker", "Bone Marker"):
+            markers[name] = pos
+    if not markers and not bodies:
+        raise ValueError(f"{path}: no marker or rigid-body position columns")
+    return MotiveTake(
+        time=table[:, 1], frame=table[:, 0], markers=markers, rigid_bodies=bodies, metadata=metadata
+    )
+
+
+def motive_dataset(
+    take: MotiveTake,
+    names,
+    sites,
+    controls,
+    *,
+    control_time=None,
+    payload_mass=None,
+    orientation_names=None,
+    window: float = 0.5,
+    tolerance: float = 5e-4,
+    **kwargs,
+) -> MocapDataset:
+    """Static frames of a Motive take with the robot's commands attached.
+
+    Args:
+        take: from :func:`read_motive_csv`.
+        names: Motive marker (or rigid body) names, one per site.
+        sites: ``(segment, s[, offset])`` per name.
+        controls: (samples, n_tendons) at the take's times, or at ``control_time``.
+        control_time: (k,) s, times of the controls in the take's clock; commands are steps
+            (zero-order hold), so each mocap sample takes the last command before it.
+        payload_mass: scalar, or per sample (like ``controls``).
+        orientation_names: optional rigid-body names per site (None entries: no orientation).
+        window, tolerance: the settle criterion (:func:`pacjax.static_frames`).
+    """
+    positions = take.positions(names)
+    n = len(take.time)
+    controls = np.asarray(controls, float)
+    payload = None if payload_mass is None else np.asarray(payload_mass, float)
+    if control_time is not None:
+        control_time = np.asarray(control_time, float)
+        if controls.ndim != 2 or controls.shape[0] != len(control_time):
+            raise ValueError(
+                f"controls must have shape ({len(control_time)}, n_tendons) like control_time"
+            )
+        idx = np.searchsorted(control_time, take.time, side="right") - 1
+        before = idx < 0
+        if np.all(before):
+            raise ValueError("control_time starts after the take ends")
+        keep = ~before
+        positions, time = positions[keep], take.time[keep]
+        controls = controls[idx[keep]]
+        if payload is not None and payload.ndim == 1:
+            payload = payload[idx[keep]]
+    else:
+        time = take.time
+        if controls.shape[:1] != (n,):
+            raise ValueError(
+                f"controls must have one row per take sample ({n}), or pass control_time"
+            )
+        keep = np.ones(n, bool)
+    if payload is not None and payload.ndim == 0:
+        payload = np.full(len(time), float(payload))
+    ori = None
+    if orientation_names is not None:
+        if len(orientation_names) != len(names):
+            raise ValueError("orientation_names needs one entry (or None) per site")
+        ori = np.full((len(time), len(names), 3, 3), np.nan)
+        for j, body in enumerate(orientation_names):
+            if body is not None:
+                if body not in take.rigid_bodies:
+                    raise ValueError(f"no rigid body named {body!r} in the take")
+                ori[:, j] = take.rigid_bodies[body][1][keep]
+    return MocapDataset.from_time_series(
+        time,
+        controls,
+        positions,
+        sites,
+        window=window,
+        tolerance=tolerance,
+        payload_mass=payload,
+        orientations=ori,
+        **kwargs,
+    )

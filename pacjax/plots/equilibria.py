@@ -1,0 +1,472 @@
+"""Figures of equilibria: the backbone in 3D and in two orthogonal projections, in mm.
+
+Matplotlib only, drawn on :class:`matplotlib.figure.Figure` objects with the Agg canvas, so
+nothing here touches pyplot's global state or the user's backend.
+
+- :func:`draw_backbone` draws one configuration on one axes (3D, or a projection ``"xz"``,
+  ``"yz"``, ``"xy"``): the body as a thick line with cross-section rings (a tube at the body's
+  radius), segment boundaries, marker sites and the scene's payloads, forces and moments.
+- :func:`plot_equilibria` draws several configurations (cases or models) overlaid: isometric 3D,
+  front (x-z) and side (y-z) views with equal aspect, and a legend.
+- :func:`plot_equilibrium_grid` draws groups of overlaid cases side by side (one column per
+  group, e.g. per tendon command), with shared scales.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping, Sequence
+
+import jax.numpy as jnp
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
+
+from .._model.loads import PointForce, PointMass, PointMoment
+from .._model.query import site_frames
+from .._model.scene import Scene
+
+__all__ = ["draw_backbone", "plot_equilibria", "plot_equilibrium_grid", "CASE_COLORS"]
+
+#: Colours of successive cases (models, commands) in a figure.
+CASE_COLORS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#17becf", "#8c564b")
+_VIEWS = {"xz": (0, 2), "yz": (1, 2), "xy": (0, 1)}
+_VIEW_TITLES = {"3d": "3D view", "xz": "front (x-z)", "yz": "side (y-z)", "xy": "top (x-y)"}
+_AXIS = "xyz"
+_POINTS_PER_SEGMENT = 24  # backbone samples per segment; rings on every other one
+_PAYLOAD_MIN_MASS = 0.05  # kg: point masses at least this heavy get a labelled weight arrow
+
+
+# ------------------------------------------------------------------------------ geometry
+def _frames(scene: Scene, q, segment, s):
+    """Rotations and positions at ``(segment[k], s[k])``, compiled once per scene structure
+    (the plots evaluate a few hundred frames per configuration; op-by-op that takes seconds)."""
+    pos, rot = site_frames(scene, q, np.asarray(segment), s)
+    return rot, pos
+
+
+class Drawn:
+    """Everything of one configuration that a figure shows, in mm (computed once)."""
+
+    def __init__(self, scene: Scene, q, n_rings_per_segment: int = 8):
+        q = np.asarray(q, float)
+        if q.shape != (scene.n_dofs,):
+            raise ValueError(
+                f"configuration has shape {q.shape}, but the scene has {scene.n_dofs} coordinates"
+            )
+        self.scene = scene
+        n = scene.n_segments
+        n_points = n * _POINTS_PER_SEGMENT + 1
+        # Backbone samples evenly spaced in segment + s, as pacjax.backbone; then marker sites
+        # and load sites, all in one kinematics call.
+        coord = np.linspace(0.0, n, n_points)
+        seg = np.minimum(np.floor(coord).astype(np.int32), n - 1)
+        s = coord - seg
+        sites = list(scene.markers)
+        loads = [x for x in scene.loads if isinstance(x, (PointMass, PointForce, PointMoment))]
+        all_seg = np.concatenate([seg, [x[0] for x in sites], [x.segment for x in loads]])
+        all_s = np.concatenate([s, [x[1] for x in sites], [float(np.asarray(x.s)) for x in loads]])
+        rot, pos = _frames(scene, jnp.asarray(q), all_seg.astype(np.int32), all_s)
+        rot, pos = np.asarray(rot), 1e3 * np.asarray(pos)
+        self.points, self.rotations = pos[:n_points], rot[:n_points]
+        r0 = np.array([float(np.asarray(x.radius)) for x in scene.robot.segments])
+        r1 = np.array(
+            [
+                r if x.radius_tip is None else float(np.asarray(x.radius_tip))
+                for r, x in zip(r0, scene.robot.segments, strict=True)
+            ]
+        )
+        self.radius = 1e3 * (r0[seg] + (r1[seg] - r0[seg]) * s)
+        step = max(1, _POINTS_PER_SEGMENT // n_rings_per_segment)
+        self.ring_index = np.arange(0, n_points, step)
+        self.boundary_index = np.arange(0, n_points, _POINTS_PER_SEGMENT)
+        self.markers = None
+        m = len(sites)
+        if sites:
+            offsets = 1e3 * np.asarray([x[2] for x in sites], float)
+            sl = slice(n_points, n_points + m)
+            self.markers = pos[sl] + np.einsum("pij,pj->pi", rot[sl], offsets)
+        self.loads = self._loads(loads, rot[n_points + m :], pos[n_points + m :])
+
+    def ring(self, i: int, n: int = 32) -> np.ndarray:
+        """Cross-section circle (n, 3) at backbone point ``i``."""
+        theta = np.linspace(0.0, 2 * np.pi, n)
+        local = np.stack([np.cos(theta), np.sin(theta), np.zeros_like(theta)], -1)
+        return self.points[i] + self.radius[i] * local @ self.rotations[i].T
+
+    def _loads(self, items, rot, pos) -> list[tuple[str, np.ndarray, np.ndarray, str]]:
+        """``(kind, point_mm, direction_unit, label)`` for every load worth drawing."""
+        out = []
+        gravity = self.scene.gravity
+        for load, r, p in zip(items, rot, pos, strict=True):
+            if isinstance(load, PointMass):
+                mass = float(np.asarray(load.mass))
+                if gravity is None or mass < _PAYLOAD_MIN_MASS:
+                    out.append(("mass", p, np.zeros(3), ""))
+                    continue
+                direction = np.asarray(gravity.direction, float)
+                out.append(("weight", p, direction, f"{1e3 * mass:.0f} g"))
+            else:
+                vec = np.asarray(load.force if isinstance(load, PointForce) else load.moment)
+                vec = r @ vec if load.follower else vec
+                size = float(np.linalg.norm(vec))
+                if size == 0:
+                    continue
+                kind = "force" if isinstance(load, PointForce) else "moment"
+                unit = "N" if kind == "force" else "N m"
+                label = f"{size:.3g} {unit}" + (" (follower)" if load.follower else "")
+                out.append((kind, p, vec / size, label))
+        return out
+
+    def extent_points(self, arrow_mm: float) -> np.ndarray:
+        pts = [self.points, self.points + self.radius[:, None], self.points - self.radius[:, None]]
+        for kind, p, d, _ in self.loads:
+            if kind in ("weight", "force"):
+                pts.append((p + arrow_mm * d)[None])
+        return np.concatenate(pts)
+
+
+def _case_color(i: int) -> str:
+    return CASE_COLORS[i % len(CASE_COLORS)]
+
+
+def _case_style(i: int):
+    """The first case solid, the others dashed on top of it, so that overlaps stay visible."""
+    return "-" if i == 0 else (0, (3.5, 1.8))
+
+
+def _as_cases(scene: Scene, equilibria) -> dict[str, tuple[Scene, np.ndarray]]:
+    """Normalise ``{label: q | Equilibrium | (scene, q)}`` or a list of them."""
+    if not isinstance(equilibria, Mapping):
+        if not isinstance(equilibria, Sequence) or isinstance(equilibria, (str, bytes)):
+            equilibria = [equilibria]
+        equilibria = {f"case {i}": e for i, e in enumerate(equilibria)}
+    cases = {}
+    for label, value in equilibria.items():
+        case_scene = scene
+        if isinstance(value, tuple) and len(value) == 2 and isinstance(value[0], Scene):
+            case_scene, value = value
+        q = getattr(value, "q", value)
+        if case_scene is None:
+            raise ValueError(f"case {label!r}: no scene given for it")
+        cases[str(label)] = (case_scene, np.asarray(q, float))
+    if not cases:
+        raise ValueError("nothing to plot: no equilibria given")
+    return cases
+
+
+def arrow_length(drawn: Sequence[Drawn]) -> float:
+    """Arrow length (mm) for loads: a fifth of the longest robot."""
+    return 0.2 * max(float(np.ptp(d.points, axis=0).max() or 1.0) for d in drawn) or 50.0
+
+
+# ------------------------------------------------------------------------------ drawing
+def draw_backbone(
+    ax,
+    scene: Scene | Drawn,
+    q=None,
+    *,
+    view: str = "3d",
+    color: str = CASE_COLORS[0],
+    label: str | None = None,
+    linestyle="-",
+    markers: bool = True,
+    rings: bool = True,
+    loads: bool = True,
+    load_labels: bool = True,
+    arrow_mm: float | None = None,
+):
+    """Draw one configuration on ``ax`` (positions in mm).
+
+    Args:
+        ax: a 3D axes (``view="3d"``) or a 2D axes for the projection ``view`` (``"xz"``,
+            ``"yz"`` or ``"xy"``).
+        scene: the :class:`Scene` (or an already evaluated drawing, internal).
+        q: configuration of ``scene``.
+        color, label, linestyle: the case's colour, legend label and backbone line style.
+        markers: draw the scene's marker sites; ``rings``: draw cross-section rings at the
+            body's radius (tube look); ``loads``: draw payload, force and moment arrows;
+            ``load_labels``: write their magnitudes (once per panel is enough).
+        arrow_mm: arrow length (mm) for loads (default: a fifth of the robot).
+    """
+    d = scene if isinstance(scene, Drawn) else Drawn(scene, q)
+    if view != "3d" and view not in _VIEWS:
+        raise ValueError(f"view must be '3d' or one of {tuple(_VIEWS)}, got {view!r}")
+    idx = (0, 1, 2) if view == "3d" else _VIEWS[view]
+
+    def xy(p):
+        p = np.atleast_2d(p)
+        return [p[:, i] for i in idx]
+
+    arrow_mm = arrow_length([d]) if arrow_mm is None else arrow_mm
+    if rings and np.any(d.radius > 0):
+        for i in d.ring_index:
+            boundary = i in d.boundary_index
+            ax.plot(
+                *xy(d.ring(i)),
+                color="0.25" if i == 0 else (color if boundary else "0.55"),
+                lw=2.2 if i == 0 else (1.0 if boundary else 0.5),
+                alpha=0.9 if i == 0 else (0.7 if boundary else 0.3),
+                zorder=1,
+            )
+    solid = linestyle in ("-", "solid")
+    ax.plot(*xy(d.points), color=color, lw=8, alpha=0.15, solid_capstyle="round", zorder=2)
+    ax.plot(
+        *xy(d.points),
+        color=color,
+        lw=3.0 if solid else 2.2,
+        ls=linestyle,
+        label=label,
+        solid_capstyle="round",
+        zorder=3,
+    )
+    ax.plot(
+        *xy(d.points[d.boundary_index[1:]]),
+        ls="none",
+        marker="D",
+        ms=5,
+        mfc="white",
+        mec=color,
+        mew=1.5,
+        zorder=4,
+    )
+    ax.plot(*xy(d.points[0]), ls="none", marker="s", ms=8, color="0.3", zorder=4)
+    if markers and d.markers is not None:
+        ax.plot(
+            *xy(d.markers), ls="none", marker="o", ms=5, mfc=color, mec="black", mew=0.8, zorder=5
+        )
+    if loads:
+        for kind, p, direction, text in d.loads:
+            if kind == "mass":
+                ax.plot(*xy(p), ls="none", marker="s", ms=4, color="0.35", zorder=5)
+            elif kind == "moment":
+                ax.plot(*xy(p), ls="none", marker="$\\circlearrowleft$", ms=14, color=color)
+                if load_labels:
+                    _label(ax, xy(p), text)
+            else:
+                _arrow(ax, p, p + arrow_mm * direction, idx, color if kind == "force" else "0.2")
+                if load_labels:
+                    _label(ax, xy(p + arrow_mm * direction), text)
+    return d
+
+
+def _arrow(ax, start, end, idx, color):
+    if len(idx) == 3:
+        delta = end - start
+        ax.quiver(*start, *delta, color=color, lw=2, arrow_length_ratio=0.25, zorder=6)
+    else:
+        ax.annotate(
+            "",
+            xy=(end[idx[0]], end[idx[1]]),
+            xytext=(start[idx[0]], start[idx[1]]),
+            arrowprops=dict(arrowstyle="-|>", color=color, lw=2, mutation_scale=14),
+            zorder=6,
+        )
+
+
+def _label(ax, coords, text):
+    if not text:
+        return
+    coords = [float(c[0]) for c in coords]
+    ax.text(*coords, " " + text, color="0.15", fontsize=8, zorder=7)
+
+
+def _draw_targets(ax, targets, view):
+    idx = (0, 1, 2) if view == "3d" else _VIEWS[view]
+    for i, (label, pts) in enumerate(targets.items()):
+        pts = 1e3 * np.atleast_2d(np.asarray(pts, float))
+        ax.plot(
+            *[pts[:, j] for j in idx],
+            ls="none",
+            marker="x" if i == 0 else "+",
+            ms=9,
+            mew=2,
+            color="black",
+            label=label,
+            zorder=8,
+        )
+
+
+def set_limits(ax, view: str, lo: np.ndarray, hi: np.ndarray):
+    """Equal scales on every axis, around the box ``lo..hi`` (mm)."""
+    center = 0.5 * (lo + hi)
+    half = 0.55 * float(np.max(hi - lo)) or 50.0
+    if view == "3d":
+        ax.set_xlim(center[0] - half, center[0] + half)
+        ax.set_ylim(center[1] - half, center[1] + half)
+        ax.set_zlim(center[2] - half, center[2] + half)
+        ax.set_box_aspect((1, 1, 1), zoom=1.1)
+        ax.set_xlabel("x (mm)", labelpad=-2)
+        ax.set_ylabel("y (mm)", labelpad=-2)
+        ax.set_zlabel("z (mm)", labelpad=-2)
+        ax.tick_params(labelsize=7, pad=0)
+        ax.view_init(elev=22, azim=-55)
+    else:
+        i, j = _VIEWS[view]
+        ax.set_xlim(center[i] - half, center[i] + half)
+        ax.set_ylim(center[j] - half, center[j] + half)
+        ax.set_aspect("equal")
+        ax.set_xlabel(f"{_AXIS[i]} (mm)")
+        ax.set_ylabel(f"{_AXIS[j]} (mm)")
+        ax.tick_params(labelsize=8)
+        ax.grid(True, color="0.9", lw=0.8)
+        ax.set_axisbelow(True)
+
+
+def _normalise_targets(targets):
+    if targets is None:
+        return {}
+    if isinstance(targets, Mapping):
+        return dict(targets)
+    return {"target": targets}
+
+
+def _legend(fig, cases: Sequence[str], show_markers: bool, targets: Mapping, has_loads: bool):
+    handles = [
+        Line2D([], [], color=_case_color(i), ls=_case_style(i), lw=3, label=label)
+        for i, label in enumerate(cases)
+    ]
+    handles.append(
+        Line2D([], [], ls="none", marker="D", mfc="white", mec="0.3", label="segment end")
+    )
+    if show_markers:
+        handles.append(
+            Line2D([], [], ls="none", marker="o", mfc="0.7", mec="black", label="marker")
+        )
+    handles.append(Line2D([], [], ls="none", marker="s", color="0.3", label="base"))
+    for i, label in enumerate(targets):
+        handles.append(
+            Line2D([], [], ls="none", marker="x" if i == 0 else "+", mew=2, color="k", label=label)
+        )
+    if has_loads:
+        handles.append(Line2D([], [], color="0.2", lw=2, marker=">", ms=5, label="load"))
+    fig.legend(
+        handles=handles,
+        loc="lower center",
+        ncol=min(len(handles), 8),
+        frameon=False,
+        fontsize=10,
+        bbox_to_anchor=(0.5, 0.0),
+    )
+
+
+def plot_equilibrium_grid(
+    groups: Mapping[str, Mapping],
+    path=None,
+    *,
+    title: str | None = None,
+    scene: Scene | None = None,
+    markers: bool = True,
+    targets=None,
+    views: Sequence[str] = ("3d", "xz", "yz"),
+) -> Figure:
+    """Groups of overlaid equilibria side by side: one column per group, one row per view,
+    all panels at the same scale.
+
+    Args:
+        groups: ``{group title: {case label: q | Equilibrium | (scene, q)}}``; the same case
+            label in every group gets the same colour (e.g. one colour per model).
+        path: where to save the figure (PNG, PDF, ... by extension); None: only return it.
+        title: figure title.
+        scene: the scene of cases given as a bare ``q`` or Equilibrium.
+        markers: draw marker sites.
+        targets: points (m, 3) in metres, or ``{label: points}``, drawn in every panel.
+        views: rows, among ``"3d"``, ``"xz"``, ``"yz"``, ``"xy"``.
+
+    Returns:
+        The :class:`matplotlib.figure.Figure`.
+    """
+    for view in views:
+        if view != "3d" and view not in _VIEWS:
+            raise ValueError(f"views must be '3d' or among {tuple(_VIEWS)}, got {view!r}")
+    drawn = {g: {k: Drawn(*v) for k, v in _as_cases(scene, c).items()} for g, c in groups.items()}
+    if not drawn:
+        raise ValueError("nothing to plot: no groups given")
+    labels: list[str] = []
+    for cases in drawn.values():
+        labels += [k for k in cases if k not in labels]
+    order = {k: i for i, k in enumerate(labels)}
+    everything = [d for cases in drawn.values() for d in cases.values()]
+    targets = _normalise_targets(targets)
+    arrow_mm = arrow_length(everything)
+    pts = [d.extent_points(arrow_mm) for d in everything]
+    pts += [1e3 * np.atleast_2d(np.asarray(t, float)) for t in targets.values()]
+    pts = np.concatenate(pts)
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+
+    single = len(drawn) == 1  # one group: the views side by side
+    n_cols, n_rows = (len(views), 1) if single else (len(drawn), len(views))
+    fig = Figure(figsize=(4.4 * n_cols + 0.4, 4.2 * n_rows + 1.4), layout="constrained")
+    FigureCanvasAgg(fig)
+    for col, (group, cases) in enumerate(drawn.items()):
+        for row, view in enumerate(views):
+            index = row + 1 if single else row * n_cols + col + 1
+            kw = {"projection": "3d"} if view == "3d" else {}
+            ax = fig.add_subplot(n_rows, n_cols, index, **kw)
+            for j, (label, d) in enumerate(cases.items()):
+                draw_backbone(
+                    ax,
+                    d,
+                    view=view,
+                    color=_case_color(order[label]),
+                    linestyle=_case_style(order[label]),
+                    markers=markers,
+                    load_labels=j == 0,
+                    arrow_mm=arrow_mm,
+                )
+            _draw_targets(ax, targets, view)
+            set_limits(ax, view, lo, hi)
+            if single:
+                ax.set_title(_VIEW_TITLES[view], fontsize=11)
+            elif row == 0:
+                ax.set_title(group, fontsize=12, fontweight="bold")
+            elif col == 0:
+                ax.set_title(_VIEW_TITLES[view], fontsize=10, loc="left", color="0.3")
+    if title:
+        fig.suptitle(title, fontsize=14)
+    show_markers = markers and any(d.markers is not None for d in everything)
+    has_loads = any(kind in ("weight", "force") for d in everything for kind, *_ in d.loads)
+    _legend(fig, labels, show_markers, targets, has_loads)
+    # Constrained layout does not see a 3D axes' z label: leave room for it explicitly.
+    fig.get_layout_engine().set(
+        rect=(0, 0.06 if single else 0.035, 1, 0.96), wspace=0.08 if "3d" in views else 0.02
+    )
+    if path is not None:
+        fig.savefig(os.fspath(path), dpi=110)
+    return fig
+
+
+def plot_equilibria(
+    scene: Scene | None,
+    equilibria,
+    path=None,
+    *,
+    title: str | None = None,
+    markers: bool = True,
+    targets=None,
+    views: Sequence[str] = ("3d", "xz", "yz"),
+) -> Figure:
+    """Several equilibria overlaid: isometric 3D, front (x-z) and side (y-z) views, in mm.
+
+    Args:
+        scene: the :class:`Scene` the configurations belong to (None when every case carries
+            its own scene, e.g. comparing models).
+        equilibria: ``{label: q | Equilibrium | (scene, q)}``, a list of them, or one.
+        path: where to save the figure; None: only return it.
+        title: figure title.
+        markers: draw the scene's marker sites.
+        targets: points (m, 3) in metres, or ``{label: points}`` (e.g. measured markers).
+        views: panels, among ``"3d"``, ``"xz"``, ``"yz"``, ``"xy"``.
+
+    Returns:
+        The :class:`matplotlib.figure.Figure`.
+    """
+    return plot_equilibrium_grid(
+        {"": _as_cases(scene, equilibria)},
+        path,
+        title=title,
+        markers=markers,
+        targets=targets,
+        views=views,
+    )
