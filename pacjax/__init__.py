@@ -17,6 +17,7 @@ from ._model.strain import PCC as PCC
 from ._model.strain import PolynomialCurvature as PolynomialCurvature
 from ._model.strain import StrainModel as StrainModel
 from ._model.tendons import Tendon as Tendon
+from ._results import RESULTS as RESULTS
 
 __version__ = "0.1.0"
 from . import dynamics as dynamics

@@ -1,5 +1,6 @@
-"""Module paths of earlier releases, kept importable for one release with a
-``DeprecationWarning``: ``import pacjax.scenefile`` gives :mod:`pacjax.io.scenefile`."""
+"""Names of earlier releases, kept working for one release with a ``DeprecationWarning``:
+module paths (``import pacjax.scenefile`` gives :mod:`pacjax.io.scenefile`) and attributes of
+result objects (:func:`warn`)."""
 
 import importlib
 import importlib.abc
@@ -37,6 +38,11 @@ class _Alias(importlib.abc.MetaPathFinder, importlib.abc.Loader):
 
     def exec_module(self, module):
         pass  # already executed under its new name
+
+
+def warn(old: str, new: str) -> None:
+    """Warn that ``old`` is deprecated in favour of ``new`` (at the caller's caller)."""
+    warnings.warn(f"{old} is deprecated and will be removed: use {new}", DeprecationWarning, 3)
 
 
 def install() -> None:

@@ -158,7 +158,7 @@ def test_damped_motion_settles_on_equilibrium():
         rtol=1e-9,
         atol=1e-11,
     )
-    assert bool(traj.success)
+    assert bool(traj.successful)
     assert float(jnp.max(jnp.abs(traj.q[0]))) == 0.0
     assert float(jnp.max(jnp.abs(traj.q[-1] - eq.q))) < 1e-6
     assert float(jnp.max(jnp.abs(traj.qdot[-1]))) < 1e-5
@@ -214,7 +214,7 @@ def test_energy_is_conserved_over_100_periods():
         rtol=1e-12,
         atol=1e-14,
     )
-    assert bool(traj.success)
+    assert bool(traj.successful)
     energy = jax.vmap(lambda q, v: dyn.total_energy(scene, q, v))(traj.q, traj.qdot)
     kinetic = jax.vmap(lambda q, v: kinetic_energy(scene, q, v))(traj.q, traj.qdot)
     assert float(jnp.max(kinetic)) > 0.1 * abs(float(energy[0]))  # it does move
@@ -239,7 +239,7 @@ def test_energy_is_conserved_by_the_default_implicit_solver():
         atol=1e-13,
         max_steps=400_000,
     )
-    assert bool(traj.success)
+    assert bool(traj.successful)
     energy = jax.vmap(lambda q, v: dyn.total_energy(SCENE, q, v, CONTROLS))(traj.q, traj.qdot)
     assert float(jnp.max(jnp.abs(energy - energy[0]))) < 1e-6 * abs(float(energy[0]))
 
@@ -315,7 +315,7 @@ def test_cantilever_free_vibration_frequency():
         rtol=1e-9,
         atol=1e-12,
     )
-    assert bool(traj.success)
+    assert bool(traj.successful)
     tip = np.stack([np.asarray(pj.tip_pose(scene, q)[0]) for q in traj.q[::4]])[:, 0]
     x = tip - tip.mean()
     crossings = ts[::4][:-1][np.sign(x[:-1]) != np.sign(x[1:])]

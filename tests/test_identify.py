@@ -83,7 +83,7 @@ def test_recovers_bending_stiffness_from_3x_off_noise_free(clean):
     )
     ei = float(fitted.robot.segments[0].bending_stiffness)
     assert abs(ei / TRUE_EI - 1) < 1e-6, (ei, report.message)
-    assert report.converged, report.message
+    assert report.successful, report.message
     assert report.train.rmse_mm < 2e-3
     assert report.parameters["bending_stiffness"]["value"] == [pytest.approx(ei)]
     assert report.parameters["bending_stiffness"]["initial"] == [pytest.approx(3 * TRUE_EI)]

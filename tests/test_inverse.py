@@ -101,7 +101,7 @@ def test_unreachable_target_is_flagged():
     target = np.array([0.0, 0.05, -0.5])  # 0.5 m away; the robot is 0.24 m long
     res = pj.inverse_statics(SCENE, target)
     assert not bool(res.reached)
-    assert int(res.code) == inverse.NOT_REACHED and "not reached" in res.message
+    assert bool(res.result == pj.RESULTS.target_not_reached) and "not reached" in res.message
     assert float(res.error) > 0.2
     np.testing.assert_allclose(float(res.error), np.linalg.norm(res.position - target), rtol=1e-9)
     # the closest pose: the tip points at the target (hanging, reaching sideways and down)
@@ -145,7 +145,7 @@ def test_tracking_is_smooth(targets):
     angle = np.linspace(0.0, np.pi / 2, 6)
     path = center + 0.01 * np.stack([np.cos(angle) - 1.0, np.sin(angle), 0.0 * angle], -1)
     tracked = pj.track(SCENE, path)
-    res = tracked.result
+    res = tracked.waypoints
     assert res.controls.shape == (6, SCENE.n_tendons)
     assert np.all(np.asarray(res.reached))
     jumps = np.abs(np.diff(np.asarray(res.controls), axis=0))

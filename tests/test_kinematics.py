@@ -884,7 +884,7 @@ def test_structured_hessian_with_written_out_tendon_chords_is_the_autodiff_one(m
     from pacjax._model.hessian import energy_derivatives
 
     scene = pj.presets.stella2023(model, tip_mass=0.2)
-    assert scene._energy_plan().chords is not None
+    assert scene.energy_plan().chords is not None
     rng = np.random.default_rng(3)
     controls = jnp.asarray(rng.uniform(0.005, 0.02, scene.n_tendons))
     structured = jax.jit(lambda q: energy_derivatives(scene, q, controls))

@@ -144,7 +144,7 @@ def _check_equilibrium(scene, controls, seed):
 
     # Convergence is reported explicitly, and consistently.
     assert converged == (residual_norm <= TOL), (converged, residual_norm)
-    assert (int(eq.result) == 0) == converged, (int(eq.result), eq.reason)
+    assert bool(eq.successful) == converged, eq.reason
     if not converged:
         assert eq.reason != "converged"
         return eq

@@ -8,8 +8,8 @@ import optimistix as optx
 
 import pacjax as pj
 from pacjax._model.inputs import static_load_sites
+from pacjax._results import STALLED
 from pacjax._statics.ptc import PseudoTransientContinuation
-from pacjax._statics.solution import STALLED
 
 
 def test_no_descent_at_the_smallest_step_is_reported_stalled_early():

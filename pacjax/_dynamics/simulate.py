@@ -42,6 +42,7 @@ import lineax as lx
 import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
+from .. import _deprecated
 from .._chord import kvaerno5
 from .._model.energy import strain_rate_energy
 from .._model.inertia import (
@@ -60,6 +61,7 @@ from .._model.inputs import (
 )
 from .._model.robot import concrete
 from .._model.scene import Scene
+from .._results import RESULTS
 from .._statics.problem import ScaledProblem
 from .damping import DEFAULT_DAMPING_RATIO, Damping, generalised_eigenvalues
 
@@ -232,8 +234,9 @@ class Trajectory(eqx.Module):
     Attributes:
         ts: (k,) save times (s).
         q: (k, n_dofs) configurations; ``qdot``: (k, n_dofs) velocities (per second).
-        success: whether the integration reached the final time (False: step limit hit or the
-            solver failed; later saves are then infinite).
+        result: a :class:`pacjax.RESULTS` item: ``successful`` when the integration reached
+            the final time, ``max_steps_reached`` or ``integration_failed`` when it stopped
+            before (later saves are then infinite).
         num_steps: accepted plus rejected steps; ``num_accepted_steps``.
         solution: the diffrax solution (for :meth:`evaluate`) when simulated with ``dense``.
     """
@@ -241,10 +244,21 @@ class Trajectory(eqx.Module):
     ts: Float[Array, " k"]
     q: Float[Array, "k n_dofs"]
     qdot: Float[Array, "k n_dofs"]
-    success: Bool[Array, ""]
+    result: RESULTS
     num_steps: Int[Array, ""]
     num_accepted_steps: Int[Array, ""]
     solution: diffrax.Solution | None = None
+
+    @property
+    def successful(self) -> Bool[Array, ""]:
+        """``result == RESULTS.successful``: the integration reached the final time."""
+        return self.result == RESULTS.successful
+
+    @property
+    def success(self) -> Bool[Array, ""]:
+        """Deprecated: use :attr:`successful`."""
+        _deprecated.warn("Trajectory.success", "Trajectory.successful")
+        return self.successful
 
     def evaluate(self, t) -> tuple[Float[Array, "*k n_dofs"], Float[Array, "*k n_dofs"]]:
         """``(q, qdot)`` at any time(s) in the span, from the solver's dense output."""
@@ -305,7 +319,8 @@ def simulate(
             stiff tendons).
         rtol, atol: tolerances of the adaptive step size (``atol`` in the state's SI units).
         dt0: first step (s); default chosen by the solver.
-        max_steps: step limit (the trajectory reports ``success=False`` beyond it).
+        max_steps: step limit (beyond it the trajectory's ``result`` is
+            ``RESULTS.max_steps_reached``).
         dense: keep the dense output (:meth:`Trajectory.evaluate`).
         phi_inertia: regularising inertia factor on PCC/PAC's ``phi`` (see
             :mod:`pacjax._model.inertia`).
@@ -436,6 +451,16 @@ def _check_saveat(saveat, t0: float, t1: float) -> np.ndarray:
 
 
 @eqx.filter_jit
+def _result(result: diffrax.RESULTS) -> RESULTS:
+    """diffrax's result as pacjax's: the step limit, or any other failure to reach ``t1``."""
+    failed = RESULTS.where(
+        result == diffrax.RESULTS.max_steps_reached,
+        RESULTS.max_steps_reached,
+        RESULTS.integration_failed,
+    )
+    return RESULTS.where(result == diffrax.RESULTS.successful, RESULTS.successful, failed)
+
+
 def _vector_field(t, y, args):
     """``(qdot, qddot)``. A jitted function of its arguments (the model and controls come in
     ``args``, not by closure): its trace, and the traces of its derivatives, are made once and
@@ -468,7 +493,7 @@ def _simulate(scene, damping, controls, q0, qdot0, span, ts, dt0, opts: _Options
         ts=sol.ts,
         q=q,
         qdot=qdot,
-        success=sol.result == diffrax.RESULTS.successful,
+        result=_result(sol.result),
         num_steps=sol.stats["num_steps"],
         num_accepted_steps=sol.stats["num_accepted_steps"],
         solution=sol if opts.dense else None,

@@ -31,8 +31,11 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
+from .. import _deprecated
 from .._model.frameloads import with_frame_loads
 from .._model.scene import Scene, normalise_sites
+from .._results import RESULTS
+from .._statics.options import SolverOptions, resolve_options
 from .dataset import MocapDataset
 from .problem import (
     L2_DELTA,
@@ -98,6 +101,7 @@ def identify(
     tol: float = 1e-10,
     chunk_size: int = 16,
     progress: bool | None = None,
+    options: SolverOptions | None = None,
     solver_options: dict | None = None,
 ) -> tuple[Scene, IdentificationReport]:
     """Fit scene parameters to static motion-capture frames.
@@ -128,8 +132,10 @@ def identify(
         chunk_size: frames per compiled batch (every dataset is padded to whole chunks, so
             train and held-out frames share one compilation).
         progress: show a tqdm progress bar (default: when stderr is a terminal).
-        solver_options: keyword arguments for :func:`pacjax.solve_batch` (default
-            ``fallback=False``).
+        options: :class:`pacjax.SolverOptions` of the frames' equilibria (default
+            ``SolverOptions()``); a frame that fails is not retried with the diffrax flow.
+        solver_options: deprecated: keyword arguments for :func:`pacjax.solve_batch` (use
+            ``options``).
 
     Returns:
         ``(fitted_scene, report)``: the scene with the fitted values (and fitted marker
@@ -208,7 +214,10 @@ def identify(
         raise ValueError(f"chunk_size must be >= 1, got {chunk_size}")
     # A frame that fails at a trial point rejects the step; the diffrax fallback (a long
     # compilation) is only used when asked for.
-    options = {"fallback": False, **(solver_options or {})}
+    options = {"fallback": False, "options": resolve_options(options)}
+    if solver_options is not None:
+        _deprecated.warn("identify(solver_options=...)", "identify(options=SolverOptions(...))")
+        options.update(solver_options)
     train = Evaluator(problem, FrameData.build(dataset, frame_loads, chunk, orient), chunk, options)
     theta = np.zeros(problem.n_theta)
 
@@ -235,7 +244,7 @@ def identify(
             * 3
         )
     )
-    theta, current, history, (iterations, converged, message) = _optimise(
+    theta, current, history, (iterations, result, message) = _optimise(
         train, theta, current, optimizer, max_iterations, tol, progress, n_obs, dataset.markers
     )
     losses, rmse = history
@@ -337,7 +346,7 @@ def identify(
         translation=np.asarray(trans),
         iterations=iterations,
         evaluations=train.count,
-        converged=converged,
+        result=result,
         message=message,
         covariance=cov,
         coordinate_names=names,
@@ -352,7 +361,7 @@ def identify(
 def _optimise(train, theta, current, optimizer, max_iterations, tol, progress, n_obs, markers):
     """Levenberg-Marquardt (or optax) iterations from ``theta``; each trial point's equilibria
     are warm-started from the current ones. Returns the optimum, its evaluation, the loss and
-    RMSE histories and ``(iterations, converged, message)``."""
+    RMSE histories and ``(iterations, result, message)``."""
     from tqdm.auto import tqdm
 
     losses = [current.cost() / n_obs]
@@ -364,7 +373,7 @@ def _optimise(train, theta, current, optimizer, max_iterations, tol, progress, n
         disable=None if progress is None else not progress,
         leave=False,
     )
-    converged, message = False, "iteration limit reached"
+    result, message = RESULTS.max_steps_reached, "iteration limit reached"
     iterations = 0
     if isinstance(optimizer, str):
         lm = _LevenbergMarquardt()
@@ -373,7 +382,7 @@ def _optimise(train, theta, current, optimizer, max_iterations, tol, progress, n
             jac = current.j[current.valid].reshape(r.size, -1)
             step, predicted = lm.step(jac, r)
             if predicted <= tol * current.cost():
-                converged, message = True, "converged (no decrease left to gain)"
+                result, message = RESULTS.successful, "converged (no decrease left to gain)"
                 break
             trial = train(theta + step, q0=current.q)
             ok = bool(np.all(trial.valid[current.valid]))
@@ -387,10 +396,13 @@ def _optimise(train, theta, current, optimizer, max_iterations, tol, progress, n
                 bar.update()
                 bar.set_postfix_str(f"RMSE {rmse[-1]:.3f} mm")
                 if np.max(np.abs(step)) < np.sqrt(tol) or decrease < tol:
-                    converged, message = True, "converged (step or loss change below tolerance)"
+                    result, message = (
+                        RESULTS.successful,
+                        "converged (step or loss change below tolerance)",
+                    )
                     break
             elif lm.rejected >= _LevenbergMarquardt.MAX_REJECTED:
-                converged = ok
+                result = RESULTS.successful if ok else RESULTS.no_equilibrium
                 message = (
                     "converged (no step reduces the loss further: at the solver's accuracy)"
                     if ok
@@ -406,6 +418,7 @@ def _optimise(train, theta, current, optimizer, max_iterations, tol, progress, n
             new_theta = np.asarray(optax.apply_updates(theta, updates))
             trial = train(new_theta, q0=current.q)
             if not np.all(trial.valid[current.valid]):
+                result = RESULTS.no_equilibrium
                 message = "stopped: a frame failed to converge along the optax path"
                 break
             previous = current.cost()
@@ -416,11 +429,11 @@ def _optimise(train, theta, current, optimizer, max_iterations, tol, progress, n
             bar.update()
             bar.set_postfix_str(f"RMSE {rmse[-1]:.3f} mm")
             if abs(previous - current.cost()) < tol * max(previous, 1e-300):
-                converged, message = True, "converged (loss change below tolerance)"
+                result, message = RESULTS.successful, "converged (loss change below tolerance)"
                 break
     bar.close()
 
-    return theta, current, (losses, rmse), (iterations, converged, message)
+    return theta, current, (losses, rmse), (iterations, result, message)
 
 
 class _LevenbergMarquardt:

@@ -8,6 +8,9 @@ import math
 
 import numpy as np
 
+from .. import _deprecated
+from .._results import RESULTS
+
 
 @dataclasses.dataclass
 class FitErrors:
@@ -121,8 +124,10 @@ class IdentificationReport:
         train, validation: :class:`FitErrors` (validation None without held-out frames).
         rotation, translation: the mocap transform ``x_mocap = rotation @ x_world + translation``.
         iterations, evaluations: accepted steps, batch equilibrium evaluations.
-        converged: whether a stopping tolerance was met (not the iteration limit).
-        message: why the fit stopped.
+        result: a :class:`pacjax.RESULTS` item: ``successful`` when a stopping tolerance was
+            met, ``max_steps_reached`` at the iteration limit, ``no_equilibrium`` when frames
+            stopped converging along the steps.
+        message: why the fit stopped, in words.
         covariance: covariance of the internal coordinates (log-parameters, offsets).
         coordinate_names: names of those coordinates.
         identifiable: False for a coordinate whose relative standard deviation exceeds 1
@@ -141,7 +146,7 @@ class IdentificationReport:
     translation: np.ndarray
     iterations: int
     evaluations: int
-    converged: bool
+    result: RESULTS
     message: str
     covariance: np.ndarray
     coordinate_names: list
@@ -149,6 +154,17 @@ class IdentificationReport:
     time_s: float
     first_evaluation_s: float
     noise: float
+
+    @property
+    def successful(self) -> bool:
+        """``result == RESULTS.successful``: a stopping tolerance was met."""
+        return bool(self.result == RESULTS.successful)
+
+    @property
+    def converged(self) -> bool:
+        """Deprecated: use :attr:`successful`."""
+        _deprecated.warn("IdentificationReport.converged", "IdentificationReport.successful")
+        return self.successful
 
     def to_dict(self) -> dict:
         return {
@@ -163,7 +179,7 @@ class IdentificationReport:
             },
             "iterations": self.iterations,
             "evaluations": self.evaluations,
-            "converged": self.converged,
+            "converged": self.successful,
             "message": self.message,
             "coordinate_names": list(self.coordinate_names),
             "identifiable": [bool(v) for v in self.identifiable],

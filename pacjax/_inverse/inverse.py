@@ -45,10 +45,12 @@ import jax.numpy as jnp
 import jax.tree_util as jtu
 import numpy as np
 
+from .. import _deprecated
 from .._model.inputs import static_load_sites
 from .._model.scene import Scene
 from .._statics.batch import solve_batch
 from .._statics.equilibrium import solve_equilibrium
+from .._statics.options import SolverOptions, resolve_options
 from .problem import (
     CommandLimits,
     checked_array,
@@ -61,14 +63,7 @@ from .problem import (
     taut_one,
     tensions_at,
 )
-from .results import (
-    NO_EQUILIBRIUM,
-    NOT_REACHED,
-    REACHED,
-    InverseResult,
-    Tracking,
-    Workspace,
-)
+from .results import InverseResult, Tracking, Workspace, inverse_result
 
 
 class _Settings(eqx.Module):
@@ -82,7 +77,7 @@ class _Settings(eqx.Module):
     rtol: float = eqx.field(static=True)
     atol: float = eqx.field(static=True)
     seed: int = eqx.field(static=True)
-    options: tuple = eqx.field(static=True)
+    options: SolverOptions = eqx.field(static=True)
 
 
 def _settings(scene, kw) -> _Settings:
@@ -97,9 +92,12 @@ def _settings(scene, kw) -> _Settings:
         raise ValueError(f"n_starts must be >= 1, got {n_starts}")
     if max_steps < 1:
         raise ValueError(f"max_steps must be >= 1, got {max_steps}")
-    options = kw.pop("solver_options") or {}
-    if not isinstance(options, Mapping):
-        raise TypeError("solver_options must be a dict of pacjax.SolverOptions fields")
+    options, legacy = kw.pop("options"), kw.pop("solver_options")
+    if legacy is not None:
+        _deprecated.warn("solver_options=", "options=pacjax.SolverOptions(...)")
+        if not isinstance(legacy, Mapping):
+            raise TypeError("solver_options must be a dict of pacjax.SolverOptions fields")
+    options = resolve_options(options, **(legacy or {}))
     limits = make_limits(
         scene,
         kw.pop("lower"),
@@ -119,7 +117,7 @@ def _settings(scene, kw) -> _Settings:
         rtol=float(kw.pop("rtol")),
         atol=float(kw.pop("atol")),
         seed=int(kw.pop("seed")),
-        options=tuple(sorted(options.items())),
+        options=options,
     )
 
 
@@ -138,6 +136,7 @@ _DEFAULTS = dict(
     rtol=1e-4,
     atol=1e-12,
     seed=0,
+    options=None,
     solver_options=None,
 )
 
@@ -174,7 +173,6 @@ def _is_reached(settings, error, angle, ok):
 
 def _result(scene, settings, u, q, error, angle, tip, rot, ok, iterations, starts):
     reached = _is_reached(settings, np.asarray(error), np.asarray(angle), np.asarray(ok))
-    code = np.where(reached, REACHED, np.where(np.asarray(ok), NOT_REACHED, NO_EQUILIBRIUM))
     tensions = (
         tensions_at(scene, q, u)
         if np.ndim(u) == 1
@@ -192,7 +190,7 @@ def _result(scene, settings, u, q, error, angle, tip, rot, ok, iterations, start
         iterations=jnp.asarray(iterations),
         starts=jnp.asarray(starts),
         converged=jnp.asarray(ok),
-        code=jnp.asarray(code),
+        result=inverse_result(reached, ok),
     )
 
 
@@ -240,7 +238,10 @@ def inverse_statics(
         max_steps: Levenberg-Marquardt iterations per start (default 60).
         rtol, atol: Levenberg-Marquardt stopping tolerances on ``z`` and the residual.
         seed: seed of the random starts.
-        solver_options: :class:`pacjax.SolverOptions` fields for the equilibrium solves.
+        options: :class:`pacjax.SolverOptions` of the equilibrium solves (default
+            ``SolverOptions()``).
+        solver_options: deprecated: a dict of :class:`pacjax.SolverOptions` fields (use
+            ``options``).
 
     Returns:
         An :class:`InverseResult`; ``reached`` is False (and the closest pose found is
@@ -289,7 +290,7 @@ def inverse_statics(
     k = 0
     for k, (u, q) in enumerate(starts, start=1):  # noqa: B007  (k: starts used)
         if q is None:
-            q = solve_equilibrium(scene, u, **dict(settings.options)).q
+            q = solve_equilibrium(scene, u, options=settings.options).q
         out, steps = solve_from(jnp.asarray(u), jnp.asarray(q))
         iterations += steps
         if bool(out[6]) and not reached(out):  # stopped short: slack tendons pulled taut
@@ -512,7 +513,7 @@ def track(
     u_all = np.asarray(stacked.controls)
     jump = float(np.max(np.abs(np.diff(u_all, axis=0)))) if n > 1 else 0.0
     return Tracking(
-        result=stacked, max_command_jump=jump, seconds=seconds, waypoints_per_second=n / seconds
+        waypoints=stacked, max_command_jump=jump, seconds=seconds, waypoints_per_second=n / seconds
     )
 
 
@@ -530,7 +531,7 @@ def sample_workspace(
     lo, hi = np.asarray(settings.limits.lower), np.asarray(settings.limits.upper)
     rng = np.random.default_rng(seed)
     u = lo + (hi - lo) * rng.uniform(0.0, 1.0, (int(n), lo.size))
-    eq = solve_batch(scene, u, chunk_size=chunk_size, progress=False, **dict(settings.options))
+    eq = solve_batch(scene, u, chunk_size=chunk_size, progress=False, options=settings.options)
     tip = _tip_batch(scene, eq.q)
     return Workspace(controls=jnp.asarray(u), q=eq.q, tip=tip, converged=eq.converged & eq.stable)
 

@@ -15,6 +15,7 @@ from jaxtyping import Array, Float
 from .._model.rotation import matvec3
 from .._model.scene import Scene, normalise_sites
 from .._statics.equilibrium import solve_equilibrium
+from .._statics.options import SolverOptions
 
 #: The residual is expressed in this unit (m) so that its Jacobian with respect to the latent
 #: commands is of order one for robots of centimetre-to-decimetre size: Levenberg-Marquardt's
@@ -94,7 +95,7 @@ def _errors(scene, target: _Target, q):
 class _Residual(eqx.Module):
     """The least-squares residual (m) of the commands' latent ``z``; aux: ``(q, ok)``."""
 
-    options: tuple = eqx.field(static=True)
+    options: SolverOptions = eqx.field(static=True)
 
     def __call__(self, z, args):
         scene, target, limits, q0 = args
@@ -116,7 +117,7 @@ def _equilibrium(scene, u, q0, options):
 
     Returns ``(q, ok)``; ``ok`` is False for a failed or unstable solve or a singular ``A``.
     """
-    eq = solve_equilibrium(scene, jax.lax.stop_gradient(u), q0, fallback=False, **dict(options))
+    eq = solve_equilibrium(scene, jax.lax.stop_gradient(u), q0, fallback=False, options=options)
     q_star = jax.lax.stop_gradient(eq.q)
     dtype = q_star.dtype
     sigma = scene.coordinate_scale(dtype)

@@ -6,21 +6,38 @@ See :mod:`pacjax.inverse`.
 from __future__ import annotations
 
 import equinox as eqx
+import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
-from .._statics.solution import describe_codes
+from .. import _deprecated
+from .._results import RESULTS, code_of, describe, from_code
 
-#: Result codes of an inverse solve.
+#: The integer codes of :attr:`InverseResult.code` (deprecated: use :attr:`InverseResult.result`).
 REACHED = 0
 NOT_REACHED = 1
 NO_EQUILIBRIUM = 2
+#: Each code's message (deprecated with the codes).
 MESSAGES = {
     REACHED: "target reached",
-    NOT_REACHED: "target not reached: the closest pose found is returned (out of reach, or "
-    "blocked by the bounds and limits)",
-    NO_EQUILIBRIUM: "no converged, stable equilibrium at the best commands found",
+    NOT_REACHED: RESULTS[RESULTS.target_not_reached],
+    NO_EQUILIBRIUM: RESULTS[RESULTS.no_equilibrium],
 }
+
+
+def inverse_result(reached, converged) -> RESULTS:
+    """``successful`` where the target is reached, ``target_not_reached`` where the pose at
+    the best commands is a converged, stable equilibrium, else ``no_equilibrium``."""
+    codes = np.where(
+        np.asarray(reached),
+        code_of(RESULTS.successful),
+        np.where(
+            np.asarray(converged),
+            code_of(RESULTS.target_not_reached),
+            code_of(RESULTS.no_equilibrium),
+        ),
+    )
+    return from_code(codes)
 
 
 class InverseResult(eqx.Module):
@@ -42,7 +59,9 @@ class InverseResult(eqx.Module):
         iterations: Levenberg-Marquardt iterations, all starts together.
         starts: how many starts were used.
         converged: the equilibrium at the solution converged and is stable.
-        code: 0 reached, 1 not reached (closest pose), 2 no equilibrium; see :attr:`message`.
+        result: a :class:`pacjax.RESULTS` item: ``successful`` (reached),
+            ``target_not_reached`` (the closest pose found) or ``no_equilibrium``; see
+            :attr:`message`.
     """
 
     controls: Float[Array, "*batch n_tendons"]
@@ -56,29 +75,58 @@ class InverseResult(eqx.Module):
     iterations: Int[Array, "*batch"]
     starts: Int[Array, "*batch"]
     converged: Bool[Array, "*batch"]
-    code: Int[Array, "*batch"]
+    result: RESULTS
+
+    @property
+    def successful(self) -> Bool[Array, "*batch"]:
+        """``result == RESULTS.successful``: the target was reached."""
+        return self.result == RESULTS.successful
 
     @property
     def message(self) -> str | list[str]:
         """What happened, in words (a list for a batch)."""
-        return describe_codes(self.code, MESSAGES)
+        return describe(self.result, "target reached")
+
+    @property
+    def code(self) -> Int[Array, "*batch"]:
+        """Deprecated: 0 reached, 1 not reached, 2 no equilibrium; use :attr:`result`."""
+        _deprecated.warn("InverseResult.code", "InverseResult.result (pacjax.RESULTS)")
+        codes = np.select(
+            [
+                np.asarray(self.result == RESULTS.successful),
+                np.asarray(self.result == RESULTS.target_not_reached),
+            ],
+            [REACHED, NOT_REACHED],
+            NO_EQUILIBRIUM,
+        )
+        return jnp.asarray(codes)
 
 
 class Tracking(eqx.Module):
     """A tracked path: an :class:`InverseResult` per waypoint, and how smooth and fast it was.
 
     Attributes:
-        result: :class:`InverseResult` with a leading waypoint axis.
+        waypoints: :class:`InverseResult` with a leading waypoint axis.
         max_command_jump: largest change of any command between neighbouring waypoints (m, or N
             for tension-mode tendons).
         seconds: wall-clock time of the whole path (compilation excluded when warm).
         waypoints_per_second: ``len(path) / seconds``.
     """
 
-    result: InverseResult
+    waypoints: InverseResult
     max_command_jump: float = eqx.field(static=True)
     seconds: float = eqx.field(static=True)
     waypoints_per_second: float = eqx.field(static=True)
+
+    @property
+    def result(self) -> RESULTS:
+        """How each waypoint's solve ended (a :class:`pacjax.RESULTS` item per waypoint)."""
+        return self.waypoints.result
+
+    @property
+    def successful(self) -> Bool[Array, " waypoints"]:
+        """Whether each waypoint was reached."""
+        return self.waypoints.successful
 
 
 class Workspace(eqx.Module):

@@ -35,7 +35,7 @@ from .._model.inputs import (
 from .._model.scene import Scene
 from .continuation import conservative_part, load_continuation, order_continuation, order_step
 from .equilibrium import solve_core
-from .options import SolverOptions
+from .options import SolverOptions, resolve_options
 from .pool import pad_rows, pool_lanes, pool_slots, pool_solve
 from .solution import Equilibrium
 
@@ -79,7 +79,8 @@ def iter_batch(
     warm_start: bool = False,
     devices: int | None = None,
     fallback: bool = True,
-    **options,
+    options: SolverOptions | None = None,
+    **overrides,
 ) -> Iterator[tuple[slice, Equilibrium]]:
     """Solve a batch chunk by chunk, yielding ``(rows, Equilibrium)`` as each chunk finishes.
 
@@ -92,7 +93,7 @@ def iter_batch(
         raise TypeError(f"chunk_size must be an integer, got {chunk_size!r}")
     if chunk_size < 1:
         raise ValueError(f"chunk_size must be >= 1, got {chunk_size}")
-    opts = SolverOptions(**options)
+    opts = resolve_options(options, **overrides)
     dtype = solver_dtype(scene)
     scene = static_load_sites(as_traced_leaves(scene, dtype))
     try:
@@ -287,7 +288,8 @@ def solve_batch(
     devices: int | None = None,
     progress: bool | None = None,
     fallback: bool = True,
-    **options,
+    options: SolverOptions | None = None,
+    **overrides,
 ) -> Equilibrium:
     """Equilibria for a batch of controls; an :class:`Equilibrium` with a leading batch axis.
 
@@ -306,7 +308,9 @@ def solve_batch(
         progress: show a progress bar (default: when there is more than one chunk).
         fallback: re-solve rows that failed with the diffrax flow. Failed rows of a
             non-conservative scene are first re-solved by load continuation whatever it says.
-        **options: :class:`SolverOptions` fields.
+        options: :class:`SolverOptions` (default ``SolverOptions()``).
+        **overrides: single :class:`SolverOptions` fields replaced in ``options`` (``tol``,
+            ``max_steps``, ...); an unknown name raises a TypeError.
     """
     parts = iter_batch(
         scene,
@@ -318,7 +322,8 @@ def solve_batch(
         warm_start=warm_start,
         devices=devices,
         fallback=fallback,
-        **options,
+        options=options,
+        **overrides,
     )
     n = np.shape(controls_batch)[0] if np.ndim(controls_batch) == 2 else 0
     show = progress if progress is not None else n > chunk_size

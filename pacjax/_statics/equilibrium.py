@@ -38,6 +38,7 @@ from .._model.inputs import (
     static_load_sites,
 )
 from .._model.scene import Scene
+from .._results import from_code
 from .continuation import (
     conservative_part,
     keep_better,
@@ -45,7 +46,7 @@ from .continuation import (
     order_continuation,
     order_step,
 )
-from .options import SolverOptions
+from .options import SolverOptions, resolve_options
 from .problem import ScaledProblem, flow_field
 from .ptc import PseudoTransientContinuation, final_code, max_abs
 from .solution import Equilibrium
@@ -117,7 +118,7 @@ def equilibrium_from(
         stable=state.eig > -solver.stability_tol,
         min_hessian_eigenvalue=state.eig,
         steps=steps,
-        result=final_code(state, converged),
+        result=from_code(final_code(state, converged)),
         energy=energy,
     )
 
@@ -149,7 +150,13 @@ _solve = jit(solve_core)
 
 
 def solve_equilibrium(
-    scene: Scene, controls=None, q0=None, *, fallback: bool = True, **options
+    scene: Scene,
+    controls=None,
+    q0=None,
+    *,
+    fallback: bool = True,
+    options: SolverOptions | None = None,
+    **overrides,
 ) -> Equilibrium:
     """Static equilibrium of ``scene`` under ``controls`` (one per tendon), starting from ``q0``.
 
@@ -165,7 +172,9 @@ def solve_equilibrium(
             the equilibrium of its conservative part), then, for ``PolynomialCurvature`` of
             order >= 2, by order continuation (from the equilibrium one order lower,
             :func:`order_step`).
-        **options: :class:`SolverOptions` fields (``tol``, ``max_steps``, ``escapes``, ...).
+        options: :class:`SolverOptions` (default ``SolverOptions()``).
+        **overrides: single :class:`SolverOptions` fields replaced in ``options`` (``tol``,
+            ``max_steps``, ``escapes``, ...); an unknown name raises a TypeError.
 
     Returns:
         An :class:`Equilibrium`. Differentiable with respect to the scene's parameters and the
@@ -173,7 +182,7 @@ def solve_equilibrium(
     """
     if not isinstance(scene, Scene):
         raise TypeError(f"scene must be a pacjax.Scene, got {type(scene).__name__}")
-    opts = SolverOptions(**options)
+    opts = resolve_options(options, **overrides)
     dtype = solver_dtype(scene)
     scene = static_load_sites(as_traced_leaves(scene, dtype))
     controls = check_controls(scene, controls, dtype)
@@ -192,7 +201,7 @@ def solve_equilibrium(
             retry = order_continuation(
                 step,
                 lambda start: solve_equilibrium(
-                    step.scene, controls, start, fallback=False, **options
+                    step.scene, controls, start, fallback=False, options=opts
                 ),
                 lambda start: _solve(scene, controls, jnp.asarray(start, dtype), opts),
                 np.asarray(q0),

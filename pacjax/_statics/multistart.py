@@ -21,6 +21,7 @@ import numpy as np
 from jaxtyping import Array, Int
 
 from .._model.scene import Scene
+from .._results import RESULTS
 from .batch import solve_batch
 from .solution import Equilibrium
 
@@ -52,6 +53,16 @@ class Equilibria(eqx.Module):
         if not -len(self) <= i < len(self):
             raise IndexError(f"equilibrium {i} out of range ({len(self)} found)")
         return jtu.tree_map(lambda x: x[i], self.equilibria)
+
+    @property
+    def result(self) -> RESULTS:
+        """``successful`` when at least one start converged, else ``no_equilibrium``."""
+        return RESULTS.successful if len(self) else RESULTS.no_equilibrium
+
+    @property
+    def successful(self) -> bool:
+        """Whether at least one equilibrium was found."""
+        return len(self) > 0
 
     @property
     def q(self):

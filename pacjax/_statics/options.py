@@ -1,5 +1,7 @@
 """The settings of every static solve: :class:`SolverOptions`."""
 
+import dataclasses
+
 import diffrax
 import equinox as eqx
 import numpy as np
@@ -8,20 +10,27 @@ from .._chord import kvaerno5
 
 
 class SolverOptions(eqx.Module):
-    """Static solver settings (changing one recompiles).
+    """Settings of the equilibrium solver, taken by every solve: :func:`pacjax.solve_equilibrium`,
+    :func:`pacjax.solve_batch`, :func:`pacjax.find_equilibria` (as ``options=`` or as keyword
+    overrides of single fields), and :func:`pacjax.identify`, :func:`pacjax.inverse_statics`,
+    :func:`pacjax.inverse_statics_batch`, :func:`pacjax.track`, :func:`pacjax.sample_workspace`
+    (as ``options=``, for their equilibria). The fields are compile-time constants: changing one
+    compiles the solver again.
 
     Args:
-        tol: tolerance on the scaled residual (see :class:`Equilibrium`).
-        max_steps: maximum continuation steps (per escape attempt).
-        initial_dt: first pseudo-time step, in units of the elastic relaxation time.
-        max_dt: largest pseudo-time step (Newton beyond it).
+        tol: tolerance on the scaled residual (see :class:`pacjax.Equilibrium`); default 1e-10.
+        max_steps: maximum continuation steps per escape attempt; default 100.
+        initial_dt: first pseudo-time step, in units of the elastic relaxation time; default 1.
+        max_dt: largest pseudo-time step (Newton beyond it); default 1e12.
         escapes: how many times a converged saddle is left along its negative-curvature
-            direction and continued again (0: report saddles as they are).
-        escape_size: size of that perturbation (rad of curvature).
-        stability_tol: threshold on the smallest scaled eigenvalue for ``stable``.
-        method: ``"ptc"`` (continuation, default) or ``"flow"`` (diffrax).
-        flow_solver: diffrax solver of the flow method (default ``diffrax.Kvaerno5`` with
-            :class:`pacjax._chord.DenseChord`).
+            direction and continued again (0: report saddles as they are); default 2.
+        escape_size: size of that perturbation (rad of curvature); default 0.05.
+        stability_tol: threshold on the smallest scaled eigenvalue for ``stable``; default
+            None: ``1e3`` times the machine epsilon of the solve's dtype.
+        method: ``"ptc"`` (continuation, default) or ``"flow"`` (diffrax's integration of the
+            flow, then continuation).
+        flow_solver: diffrax solver of the flow method; default ``diffrax.Kvaerno5`` with
+            :class:`pacjax._chord.DenseChord`.
         hessian: ``"structured"`` (default: per-segment forward derivatives of the kinematics,
             :mod:`pacjax._model.hessian`, plus the forward derivative of the follower loads alone
             in a non-conservative scene) or ``"autodiff"`` (``jax.jacfwd`` of the residual).
@@ -62,3 +71,20 @@ class SolverOptions(eqx.Module):
             raise ValueError(f"escapes must be >= 0, got {self.escapes}")
         if not isinstance(self.flow_solver, diffrax.AbstractSolver):
             raise TypeError(f"flow_solver must be a diffrax solver, got {self.flow_solver!r}")
+
+
+def resolve_options(options: SolverOptions | None = None, **overrides) -> SolverOptions:
+    """``options`` (default ``SolverOptions()``) with the fields in ``overrides``
+    replaced. A name that is not a field raises a TypeError that lists the valid ones."""
+    if options is None:
+        options = SolverOptions()
+    elif not isinstance(options, SolverOptions):
+        raise TypeError(f"options must be a pacjax.SolverOptions, got {type(options).__name__}")
+    if not overrides:
+        return options
+    fields = [f.name for f in dataclasses.fields(SolverOptions)]
+    unknown = sorted(set(overrides) - set(fields))
+    if unknown:
+        names = ", ".join(unknown)
+        raise TypeError(f"unknown solver option {names}; valid options: {', '.join(fields)}")
+    return dataclasses.replace(options, **overrides)

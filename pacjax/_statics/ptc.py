@@ -1,18 +1,18 @@
 """Pseudo-transient continuation as an optimistix root finder.
 
-It integrates the damped flow ``D qdot = -F(q)`` with linearised implicit Euler steps
-``(I / dt + dr/dy) dy = -r`` in scaled coordinates (``r = F / (d sigma)``, ``y = q / sigma``,
-``d`` the diagonal of the elastic stiffness). The pseudo-time step ``dt`` grows with the fall of
-the residual (switched evolution relaxation), so the steps become Newton steps near the
-solution; a step that raises the merit (the energy for conservative scenes; see ``frozen_work``
-for the others) is rejected and ``dt`` shrinks until the step is a short stretch of the flow,
-which is a descent direction whatever the curvature. A step ``dy`` lands at the problem's
-``moved(y, dy)`` where it has one (equal to ``y + dy`` to first order; PCC/PAC bending moves as
-a vector, :meth:`pacjax._statics.problem.ScaledProblem.moved`). A converged saddle (smallest
-eigenvalue of the scaled stiffness below ``-stability_tol``) is left along its negative-curvature
-direction, a bounded number of times, and the continuation then goes on until the stiffness is positive again
-(a residual below the tolerance next to the saddle is not convergence; for a non-conservative
-problem only on the step after the escape, since the flow may lead back to the same point).
+It integrates the damped flow ``D qdot = -F(q)`` with linearised implicit Euler steps ``(I / dt +
+dr/dy) dy = -r`` in scaled coordinates (``r = F / (d sigma)``, ``y = q / sigma``, ``d`` the
+diagonal of the elastic stiffness). The pseudo-time step ``dt`` grows with the fall of the residual
+(switched evolution relaxation), so the steps become Newton steps near the solution; a step that
+raises the merit (the energy for conservative scenes; see ``frozen_work`` for the others) is
+rejected and ``dt`` shrinks until the step is a short stretch of the flow, which is a descent
+direction whatever the curvature. A step ``dy`` lands at the problem's ``moved(y, dy)`` where it
+has one (equal to ``y + dy`` to first order; PCC/PAC bending moves as a vector,
+:meth:`pacjax._statics.problem.ScaledProblem.moved`). A converged saddle (smallest eigenvalue of
+the scaled stiffness below ``-stability_tol``) is left along its negative-curvature direction, a
+bounded number of times, and the continuation then goes on until the stiffness is positive again (a
+residual below the tolerance next to the saddle is not convergence; for a non-conservative problem
+only on the step after the escape, since the flow may lead back to the same point).
 
 Written as an ``optimistix.AbstractRootFinder`` so that ``optimistix.root_find`` runs the loop and
 provides the implicit-function-theorem adjoint: the Hessian graph is traced once.
@@ -26,8 +26,8 @@ import jax.numpy as jnp
 import optimistix as optx
 from jaxtyping import Array, Bool, Float, Int
 
+from .._results import MAX_STEPS_REACHED, NONFINITE, STALLED, SUCCESSFUL
 from . import linalg as _linalg
-from .solution import MAX_STEPS, NONFINITE, STALLED, SUCCESS
 
 _MIN_DT = 1e-10
 _MIN_ALPHA = 1.0 / 256
@@ -132,7 +132,7 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
             eigvecs=jnp.eye(n, dtype=dtype),
             escape_dy=jnp.zeros(n, dtype),
             drive=jnp.zeros(n, dtype),
-            code=jnp.asarray(SUCCESS),
+            code=jnp.asarray(SUCCESSFUL),
         )
 
     def _converged(self, r) -> Bool[Array, ""]:
@@ -304,7 +304,7 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
         # PolynomialCurvature(3) sat at residual 1.4e-2 for 297 of its 300 steps, the other
         # rows of its batch idle beside it).
         stalled = tiny_dt & (~ok | ~accept)
-        code = jnp.where(stalled & (code == SUCCESS), STALLED, code)
+        code = jnp.where(stalled & (code == SUCCESSFUL), STALLED, code)
         new_state = PTCState(
             residual=keep(r_new, state.residual),
             merit=keep(m_new, state.merit),
@@ -335,7 +335,7 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
         # saddle-free steps move it away from the saddle geometrically, and the energy, which
         # the escape lowered below the saddle's, cannot bring it back.
         done = self._converged(state.residual) & ~self._wants_escape(state) & ~state.escaping
-        failed = state.code != SUCCESS
+        failed = state.code != SUCCESSFUL
         result = optx.RESULTS.where(
             failed, optx.RESULTS.nonlinear_divergence, optx.RESULTS.successful
         )
@@ -347,9 +347,9 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
 
 
 def final_code(state: PTCState, converged) -> Int[Array, ""]:
-    """The :mod:`pacjax._statics.solution` result code after a run."""
+    """The :class:`pacjax.RESULTS` code after a run (see :func:`pacjax._results.from_code`)."""
     return jnp.where(
         converged,
-        SUCCESS,
-        jnp.where(state.code == SUCCESS, MAX_STEPS, state.code),
+        SUCCESSFUL,
+        jnp.where(state.code == SUCCESSFUL, MAX_STEPS_REACHED, state.code),
     )

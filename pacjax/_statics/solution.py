@@ -1,20 +1,9 @@
-"""The result of an equilibrium solve."""
+"""The result of an equilibrium solve: :class:`Equilibrium`."""
 
 import equinox as eqx
-import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
-# Result codes (an int array so that they survive jit and vmap).
-SUCCESS = 0
-MAX_STEPS = 1
-NONFINITE = 2
-STALLED = 3
-REASONS = {
-    SUCCESS: "converged",
-    MAX_STEPS: "hit the maximum number of steps before the residual fell below tolerance",
-    NONFINITE: "the residual or energy became NaN or infinite",
-    STALLED: "the step size collapsed: no step reduced the energy (or residual)",
-}
+from .._results import RESULTS, describe
 
 
 class Equilibrium(eqx.Module):
@@ -33,7 +22,9 @@ class Equilibrium(eqx.Module):
             conservative scene, the Hessian of ``V``), relative to the elastic stiffness (1 means
             as stiff as the body alone).
         steps: continuation steps plus Newton polish steps.
-        result: a code: 0 converged, 1 max steps, 2 non-finite, 3 stalled (see :attr:`reason`).
+        result: how the solve ended, a :class:`pacjax.RESULTS` item (``successful`` exactly
+            when ``converged``; see :attr:`reason`). A converged saddle is successful and not
+            ``stable``: check both.
         energy: potential energy (J) at ``q`` (NaN for scenes with non-conservative loads).
     """
 
@@ -43,18 +34,15 @@ class Equilibrium(eqx.Module):
     stable: Bool[Array, "*batch"]
     min_hessian_eigenvalue: Float[Array, "*batch"]
     steps: Int[Array, "*batch"]
-    result: Int[Array, "*batch"]
+    result: RESULTS
     energy: Float[Array, "*batch"]
+
+    @property
+    def successful(self) -> Bool[Array, "*batch"]:
+        """``result == RESULTS.successful`` (the residual fell below the tolerance)."""
+        return self.result == RESULTS.successful
 
     @property
     def reason(self) -> str | list[str]:
         """Why the solve stopped, in words (a list for a batch)."""
-        return describe_codes(self.result, REASONS)
-
-
-def describe_codes(codes, words: dict) -> str | list[str]:
-    """Result code(s) in words: a string for one code, a list for a batch."""
-    codes = np.asarray(codes)
-    if codes.ndim == 0:
-        return words[int(codes)]
-    return [words[int(c)] for c in codes.reshape(-1)]
+        return describe(self.result, "converged")

@@ -20,7 +20,7 @@ The file (HDF5, one dataset per column, row ``i`` = command ``i``):
 ``stable``         (n,)              bool (False at a saddle)
 ``residual_norm``  (n,)              scaled residual (see :class:`pacjax.Equilibrium`)
 ``steps``          (n,)              solver steps
-``result``         (n,)              solver result code (0 converged; ``Equilibrium.reason``)
+``result``         (n,)              index of the :class:`pacjax.RESULTS` item (0 successful)
 =================  ================  ==========================================================
 
 File attributes: ``scene_toml`` (the scene file's text, when given), ``sampler``, ``seed``,
@@ -43,6 +43,8 @@ import jax.numpy as jnp
 import numpy as np
 
 import pacjax as pj
+
+from .._results import code_of
 
 SAMPLERS = ("uniform", "lhs", "grid")
 
@@ -179,7 +181,7 @@ def chunk_columns(scene: pj.Scene, commands: np.ndarray, eq: pj.Equilibrium) -> 
         "stable": np.asarray(eq.stable, bool),
         "residual_norm": np.asarray(eq.residual_norm),
         "steps": np.asarray(eq.steps, np.int32),
-        "result": np.asarray(eq.result, np.int8),
+        "result": code_of(eq.result).astype(np.int8),
     }
     if sites is not None:
         columns["markers"] = np.asarray(sites)

@@ -36,6 +36,13 @@ def timed_solve(scene, controls, **options):
 
 
 @eqx.filter_jit
+def solver_options(extra: dict) -> pj.SolverOptions:
+    """The scene file's ``[solver]`` table as :class:`pacjax.SolverOptions` (its ``fallback``
+    is an argument of the single and batched solves, not an option of the workflows)."""
+    fields = {k: v for k, v in extra["solver"].items() if k != "fallback"}
+    return pj.SolverOptions(**fields)
+
+
 def summary(scene, q, controls):
     """Tip pose, marker positions and tendon tensions at ``q``, in one compiled call (op by
     op, these kinematics take seconds)."""

@@ -13,7 +13,7 @@ import numpy as np
 
 import pacjax as pj
 
-from .common import output_dir
+from .common import output_dir, solver_options
 
 
 # ------------------------------------------------------------------------------ fit
@@ -93,7 +93,7 @@ def fit(
             loss=loss,
             noise=noise,
             max_iterations=max_iterations,
-            solver_options=extra["solver"],
+            options=solver_options(extra),
         )
     except (ValueError, TypeError) as err:
         raise click.ClickException(str(err)) from None
@@ -210,14 +210,14 @@ def inverse(
     out = output_dir(out)
     name = extra["name"]
     options = dict(reached_tol=tol, upper=upper, max_tension=max_tension)
-    options["solver_options"] = extra["solver"] or None
+    options["options"] = solver_options(extra)
     start = time.perf_counter()
     try:
         if independent:
             results = [pj.inverse_statics(scene, t, **options) for t in targets]
             result = jax.tree_util.tree_map(lambda *xs: np.stack(xs), *results)
         else:
-            result = pj.track(scene, targets, **options).result
+            result = pj.track(scene, targets, **options).waypoints
     except ValueError as err:
         raise click.ClickException(f"{scene_file}: {err}") from None
     seconds = time.perf_counter() - start

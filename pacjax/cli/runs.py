@@ -92,7 +92,7 @@ def simulate(
         seconds = time.perf_counter() - begin
     except ValueError as err:
         raise click.ClickException(f"{scene_file}: {err}") from None
-    ok = bool(trajectory.success)
+    ok = bool(trajectory.successful)
     tips = animation.tip_positions(scene, trajectory)
     result = {
         "scene": os.path.abspath(scene_file),
