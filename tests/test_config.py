@@ -1,6 +1,7 @@
 """What importing pacjax sets in JAX (see pacjax/_config.py), and a hang on 2 cores that the
 solver must not bring back (independent batched LAPACK calls; see pacjax/_ptc.py)."""
 
+import os
 import subprocess
 import sys
 import textwrap
@@ -18,10 +19,64 @@ def test_float64_is_on():
     assert jnp.zeros(1).dtype == jnp.float64
 
 
-def test_float32_products_are_not_rounded_to_tf32():
-    # JAX's GPU default (TensorFloat-32 inputs) left 0 % of the paper robot's float32 equilibria
-    # converged on an H100; pacjax asks for full float32 products everywhere.
-    assert jax.config.jax_default_matmul_precision in ("highest", "float32")
+def test_import_changes_no_other_jax_setting():
+    # matmul precision is asked for on each product (pacjax._config.MATMUL_PRECISION), not set
+    # for the whole process
+    assert jax.config.jax_default_matmul_precision is None
+
+
+def _equations(jaxpr):
+    """Every equation of a jaxpr and of all its sub-jaxprs (loops, conds, calls)."""
+    from jax.extend import core as jcore
+
+    for eqn in jaxpr.eqns:
+        yield eqn
+        for value in eqn.params.values():
+            for x in value if isinstance(value, (tuple, list)) else (value,):
+                if isinstance(x, jcore.ClosedJaxpr):
+                    yield from _equations(x.jaxpr)
+                elif isinstance(x, jcore.Jaxpr):
+                    yield from _equations(x)
+
+
+def test_every_product_asks_for_full_precision():
+    """JAX's GPU default rounds float32 product inputs to TensorFloat-32 (10-bit mantissa),
+    which left 0 % of the paper robot's float32 equilibria converged on an H100: every matrix
+    product of a solve, its structured Hessian, and the dynamics' vector field asks for full
+    precision."""
+    import pacjax as pj
+    from pacjax._statics.equilibrium import solve_core
+    from pacjax._statics.options import SolverOptions
+
+    scene = pj.presets.stella2023(pj.PAC(), n_sections=1, tip_mass=0.1, quadrature_points=4)
+    u, q = jnp.zeros(scene.n_tendons), scene.zeros()
+    options = SolverOptions()
+    programs = {
+        "solve": jax.make_jaxpr(lambda a, b: solve_core(scene, a, b, options))(u, q),
+        "dynamics": jax.make_jaxpr(lambda a, b: pj.dynamics.accelerations(scene, a, b, u))(q, q),
+    }
+    for name, program in programs.items():
+        dots = [e for e in _equations(program.jaxpr) if e.primitive.name == "dot_general"]
+        assert dots, name
+        loose = [e for e in dots if e.params["precision"] != (jax.lax.Precision.HIGHEST,) * 2]
+        assert not loose, f"{name}: {len(loose)} of {len(dots)} products at default precision"
+
+
+def test_float64_can_be_left_off():
+    """``PACJAX_NO_X64=1``: importing pacjax leaves JAX in float32, and solves still work."""
+    code = textwrap.dedent(
+        """
+        import jax
+        import pacjax as pj
+        assert not jax.config.jax_enable_x64
+        scene = pj.presets.stella2023(pj.PCC(), n_sections=1, quadrature_points=4)
+        eq = pj.solve_equilibrium(scene, tol=1e-4)
+        assert eq.q.dtype == jax.numpy.float32 and bool(eq.converged), eq.reason
+        """
+    )
+    env = {**os.environ, "PACJAX_NO_X64": "1"}
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr[-2000:]
 
 
 def _lu_calls(jaxpr) -> int:

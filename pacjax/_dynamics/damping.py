@@ -6,6 +6,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from .._config import MATMUL_PRECISION
 from .._model.inertia import mass_matrix
 from .._model.inputs import solver_dtype
 from .._model.robot import as_float, check_positive
@@ -88,4 +89,10 @@ def generalised_eigenvalues(stiffness, mass):
     inv = jax.scipy.linalg.solve_triangular(
         chol, jnp.eye(mass.shape[0], dtype=mass.dtype), lower=True
     )
-    return jnp.linalg.eigvalsh(inv @ (0.5 * (stiffness + stiffness.T)) @ inv.T)
+    return jnp.linalg.eigvalsh(
+        jnp.matmul(
+            jnp.matmul(inv, 0.5 * (stiffness + stiffness.T), precision=MATMUL_PRECISION),
+            inv.T,
+            precision=MATMUL_PRECISION,
+        )
+    )

@@ -44,6 +44,7 @@ from jaxtyping import Array, Bool, Float, Int
 
 from .. import _deprecated
 from .._chord import kvaerno5
+from .._config import MATMUL_PRECISION
 from .._model.energy import strain_rate_energy
 from .._model.inertia import (
     PHI_INERTIA_FACTOR,
@@ -144,7 +145,7 @@ class _Model(eqx.Module):
         if self.scene.tendons:
             force = force + self.tendon_forces(q, qdot, u, udot)
         force = force - self.damping.stiffness * self.material_damping(q, qdot)
-        force = force - self.damping.mass * (mass @ qdot)
+        force = force - self.damping.mass * (jnp.matmul(mass, qdot, precision=MATMUL_PRECISION))
         operator = lx.MatrixLinearOperator(mass, lx.positive_semidefinite_tag)
         # throw=False: a wild Newton iterate of the implicit solver gives NaN here, and diffrax
         # must see it to reject the step (a raise would abort the whole simulation).

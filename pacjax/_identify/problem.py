@@ -17,6 +17,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
+from .._config import MATMUL_PRECISION
 from .._model.frameloads import FrameLoads
 from .._model.robot import ExponentialStiffening
 from .._model.rotation import exp_so3, matvec3
@@ -91,7 +92,7 @@ class Problem(eqx.Module):
         for block, init, th in zip(self.blocks, self.initial, self.split(theta), strict=True):
             value = self.physical(block, init, th)
             if block.name == "mocap_transform":
-                rot = exp_so3(value[:3]) @ self.rotation0
+                rot = jnp.matmul(exp_so3(value[:3]), self.rotation0, precision=MATMUL_PRECISION)
                 trans = self.translation0 + value[3:]
             elif block.name == "marker_offsets":
                 offsets = value
@@ -131,7 +132,7 @@ def _frame_residual(problem: Problem, theta, q, controls, row, meas, mask, rmeas
         q, np.asarray(problem.site_segment), jnp.asarray(problem.site_s, q.dtype)
     )
     world = frames_pos + matvec3(frames_rot, offsets)
-    pred = world @ rot.T + trans
+    pred = jnp.matmul(world, rot.T, precision=MATMUL_PRECISION) + trans
     d = (pred - meas) / problem.noise * mask[:, None]
     # Huber weights on each marker's distance (the quadratic loss is the threshold at
     # L2_DELTA: one compiled residual serves both losses).
@@ -141,9 +142,9 @@ def _frame_residual(problem: Problem, theta, q, controls, row, meas, mask, rmeas
     w = jnp.where(big, jnp.sqrt(2.0 * optax.huber_loss(e, delta=problem.huber_delta)) / e, 1.0)
     d = d * w[:, None]
     parts = [d.reshape(-1)]
-    rpred = jnp.einsum("ij,mjk->mik", rot, frames_rot)
+    rpred = jnp.einsum("ij,mjk->mik", rot, frames_rot, precision=MATMUL_PRECISION)
     if rmeas is not None:
-        rel = jnp.einsum("mji,mjk->mik", rpred, rmeas)
+        rel = jnp.einsum("mji,mjk->mik", rpred, rmeas, precision=MATMUL_PRECISION)
         skew = 0.5 * (rel - jnp.swapaxes(rel, -1, -2))
         v = jnp.stack([skew[:, 2, 1], skew[:, 0, 2], skew[:, 1, 0]], -1)
         parts.append((v / problem.orientation_noise * rmask[:, None]).reshape(-1))
@@ -168,7 +169,7 @@ def _frame_jacobian(problem, theta, q, controls, row, meas, mask, rmeas, rmask):
     stiffness = jax.jacfwd(equilibrium_residual, 1)(theta, q)
     forcing = jax.jacfwd(equilibrium_residual, 0)(theta, q)
     dq = -jnp.linalg.solve(stiffness, forcing)  # implicit function theorem
-    return r, d_theta + d_q @ dq, pred, rpred
+    return r, d_theta + jnp.matmul(d_q, dq, precision=MATMUL_PRECISION), pred, rpred
 
 
 @eqx.filter_jit

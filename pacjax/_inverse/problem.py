@@ -12,6 +12,7 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Float
 
+from .._config import MATMUL_PRECISION
 from .._model.rotation import matvec3
 from .._model.scene import Scene, normalise_sites
 from .._statics.equilibrium import solve_equilibrium
@@ -73,12 +74,12 @@ def _sites_pose(scene: Scene, target: _Target, q):
 
 def _rotation_error(r_target, r):
     """Axis times sine of the rotation from ``r_target`` to ``r`` (smooth, 0 when equal)."""
-    m = r_target.T @ r
+    m = jnp.matmul(r_target.T, r, precision=MATMUL_PRECISION)
     return 0.5 * jnp.stack([m[2, 1] - m[1, 2], m[0, 2] - m[2, 0], m[1, 0] - m[0, 1]])
 
 
 def _angle(r_target, r):
-    m = r_target.T @ r
+    m = jnp.matmul(r_target.T, r, precision=MATMUL_PRECISION)
     sin = jnp.linalg.norm(_rotation_error(r_target, r))
     cos = 0.5 * (jnp.trace(m) - 1.0)
     return jnp.arctan2(sin, cos)

@@ -5,6 +5,7 @@ import jax.numpy as jnp
 import jax.tree_util as jtu
 from jaxtyping import Array, Float
 
+from .._config import MATMUL_PRECISION
 from .quadrature import gauss_legendre
 from .robot import Robot, Segment
 from .rotation import hat
@@ -108,7 +109,11 @@ def segment_strain_rate_energy(
     k_coord = segment.torsion_stiffness.astype(q.dtype) / length
     if model.coordinate_energy(q, k_coord) is not None:
         hess = jax.hessian(lambda x: model.coordinate_energy(x, k_coord))(jnp.zeros_like(q))
-        rate = rate + 0.5 * qdot @ hess @ qdot
+        rate = rate + jnp.matmul(
+            jnp.matmul(0.5 * qdot, hess, precision=MATMUL_PRECISION),
+            qdot,
+            precision=MATMUL_PRECISION,
+        )
     axial = segment.axial_stiffness.astype(q.dtype)
     return rate + 0.5 * axial * elongation_rate**2
 
@@ -224,7 +229,7 @@ def moment_cotangent(
 
     Virtual work ``M . dtheta`` with ``[dtheta]x = dR R^T`` gives ``Q_j = 1/2 <dR/dq_j, [M]x R>``.
     """
-    return 0.5 * hat(moment_world) @ rotation
+    return jnp.matmul(0.5 * hat(moment_world), rotation, precision=MATMUL_PRECISION)
 
 
 def mass_beyond(robot: Robot, s, dtype) -> Array:

@@ -32,6 +32,7 @@ import jax.tree_util as jtu
 import numpy as np
 from jaxtyping import Array, Float
 
+from .._config import MATMUL_PRECISION
 from .kinematics import contract, index_runs, jacobian_and_value
 from .loads import PointForce, PointMoment
 from .robot import known_sites
@@ -42,7 +43,7 @@ from .tendons import tendon_parts_derivatives
 
 def _contract(jac, delta):
     """``J delta`` for one leaf: ``jac`` (..., d) times ``delta`` (d,)."""
-    return jnp.tensordot(jac, delta, axes=1)
+    return jnp.tensordot(jac, delta, axes=1, precision=MATMUL_PRECISION)
 
 
 def elastic_hessian(
@@ -147,8 +148,8 @@ def energy_derivatives(
         # Psi's weights on every knot (zero off its rows).
         e = jnp.asarray(embed, rot.dtype)
         lam_frames = (
-            jnp.einsum("kr,rij->kij", e, lam_rot),
-            jnp.einsum("kr,ri->ki", e, lam_pos),
+            jnp.einsum("kr,rij->kij", e, lam_rot, precision=MATMUL_PRECISION),
+            jnp.einsum("kr,ri->ki", e, lam_pos, precision=MATMUL_PRECISION),
             lam_moment,
         )
         h_parts = 0.0
@@ -228,7 +229,7 @@ def follower_jacobian(
     (d_rot, d_pos), (rot, pos) = jax.jacfwd(frames, has_aux=True)(q)
     world = matvec3(rot, jnp.stack([f.force for f in followers]).astype(q.dtype))
     # dR/dq_j = [w_j]x R: W (k, 3, n) from the skew part of dR R^T.
-    skew = jnp.einsum("kijn,klj->kiln", d_rot, rot)
+    skew = jnp.einsum("kijn,klj->kiln", d_rot, rot, precision=MATMUL_PRECISION)
     omega = jnp.stack([skew[:, 2, 1], skew[:, 0, 2], skew[:, 1, 0]], axis=1)
     forces = iter(world)
     dead_scene = eqx.tree_at(
@@ -236,5 +237,7 @@ def follower_jacobian(
     )
     _, _, hessian = energy_derivatives(dead_scene, q, controls, dead_consts)
     # -J^T df/dq = J^T [f]x W
-    hessian = hessian + jnp.einsum("kin,kij,kjm->nm", d_pos, jax.vmap(hat)(world), omega)
+    hessian = hessian + jnp.einsum(
+        "kin,kij,kjm->nm", d_pos, jax.vmap(hat)(world), omega, precision=MATMUL_PRECISION
+    )
     return hessian

@@ -36,6 +36,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from .._config import MATMUL_PRECISION
 from .loads import PointMass
 from .quadrature import gauss_legendre
 from .robot import known_sites
@@ -134,7 +135,9 @@ def kinetic_energy(
         )
         energy = energy + 0.5 * jnp.sum(masses * jnp.sum(vel * vel, axis=-1))
         if moments is not None:
-            omega = _vee_skew(jnp.swapaxes(rot, -1, -2) @ rot_dot)
+            omega = _vee_skew(
+                jnp.matmul(jnp.swapaxes(rot, -1, -2), rot_dot, precision=MATMUL_PRECISION)
+            )
             energy = energy + 0.5 * jnp.sum(moments * omega * omega)
     extra = coordinate_inertia(scene, dtype, phi_inertia)
     if extra is not None:
@@ -202,18 +205,24 @@ def body_dynamics(
 
         def velocities(x, kinematics=kinematics):
             (rot, _), (rot_dot, vel) = jax.jvp(kinematics, (x,), (qdot,))
-            return vel, _vee_skew(jnp.swapaxes(rot, -1, -2) @ rot_dot)
+            return vel, _vee_skew(
+                jnp.matmul(jnp.swapaxes(rot, -1, -2), rot_dot, precision=MATMUL_PRECISION)
+            )
 
         (_, omega), (acc, alpha) = jax.jvp(velocities, (q,), (qdot,))
         (rot, _), lin = jax.linearize(kinematics, q)
         d_rot, d_pos = jax.vmap(lin)(jnp.eye(n, dtype=dtype))  # (n, p, 3, 3), (n, p, 3)
-        mat = mat + jnp.einsum("ipa,p,jpa->ij", d_pos, masses, d_pos)
-        bias = bias + jnp.einsum("ipa,p,pa->i", d_pos, masses, acc)
+        mat = mat + jnp.einsum("ipa,p,jpa->ij", d_pos, masses, d_pos, precision=MATMUL_PRECISION)
+        bias = bias + jnp.einsum("ipa,p,pa->i", d_pos, masses, acc, precision=MATMUL_PRECISION)
         if moments is not None:
-            d_omega = _vee_skew(jnp.swapaxes(rot, -1, -2)[None] @ d_rot)  # (n, p, 3)
-            mat = mat + jnp.einsum("ipa,pa,jpa->ij", d_omega, moments, d_omega)
+            d_omega = _vee_skew(
+                jnp.matmul(jnp.swapaxes(rot, -1, -2)[None], d_rot, precision=MATMUL_PRECISION)
+            )  # (n, p, 3)
+            mat = mat + jnp.einsum(
+                "ipa,pa,jpa->ij", d_omega, moments, d_omega, precision=MATMUL_PRECISION
+            )
             euler = moments * alpha + jnp.cross(omega, moments * omega)
-            bias = bias + jnp.einsum("ipa,pa->i", d_omega, euler)
+            bias = bias + jnp.einsum("ipa,pa->i", d_omega, euler, precision=MATMUL_PRECISION)
     extra = coordinate_inertia(scene, dtype, phi_inertia)
     if extra is not None:
         mat = mat + jnp.diag(extra)

@@ -28,6 +28,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from .._config import MATMUL_PRECISION
 from .quadrature import gauss_legendre
 from .rotation import cross3, exp_so3, matmul3, matvec3, rotate
 from .strain import StrainModel
@@ -149,7 +150,7 @@ def contract(cotangent, tree):
     """``sum`` over the leaves of ``cotangent . leaf``, contracting every axis of the cotangent's
     leaf (a scalar for a value, a vector along ``x`` for a Jacobian)."""
     leaves = zip(jax.tree_util.tree_leaves(cotangent), jax.tree_util.tree_leaves(tree), strict=True)
-    return sum(jnp.tensordot(lt, x, axes=lt.ndim) for lt, x in leaves)
+    return sum(jnp.tensordot(lt, x, axes=lt.ndim, precision=MATMUL_PRECISION) for lt, x in leaves)
 
 
 def index_runs(flat_index: np.ndarray) -> tuple[tuple[int, int], ...]:
@@ -307,7 +308,7 @@ def segment_knot_frames(
 
     _, rest = jax.lax.scan(accumulate, first, steps)
     rots = jnp.concatenate([first[None], rest])
-    tangents = jnp.einsum("kij,knj->kni", rots[:-1], node_dirs)
+    tangents = jnp.einsum("kij,knj->kni", rots[:-1], node_dirs, precision=MATMUL_PRECISION)
     return _knot_positions(model, q, length, h, weights, rots, tangents, node_weights)
 
 
@@ -324,11 +325,11 @@ def _tangent_sums(h, weights, tangents, node_weights):
     the tangents at the position nodes (``(intervals, nodes, 3)``)."""
     dtype = tangents.dtype
     w = jnp.asarray(weights, dtype)
-    steps_pos = h[:, None] * jnp.einsum("n,kni->ki", w, tangents)
+    steps_pos = h[:, None] * jnp.einsum("n,kni->ki", w, tangents, precision=MATMUL_PRECISION)
     pos = jnp.concatenate([jnp.zeros((1, 3), dtype), jnp.cumsum(steps_pos, axis=0)])
     if node_weights is None:
         return pos, None
-    return pos, jnp.einsum("k,kn,kni->i", h, node_weights * w, tangents)
+    return pos, jnp.einsum("k,kn,kni->i", h, node_weights * w, tangents, precision=MATMUL_PRECISION)
 
 
 def has_plane_derivatives(model: StrainModel) -> bool:
@@ -387,8 +388,12 @@ def segment_knot_jacobian(
     (d_rot, _), (rots, _) = jax.vmap(point)(theta_k)
     (_, d_tan), (_, tangents) = jax.vmap(jax.vmap(point))(theta_n)
     # Chain rule through (theta, phi)(q).
-    d_rot = jnp.einsum("kija,kad->kijd", d_rot, _angle_jacobian(basis_k))
-    d_tan = jnp.einsum("inxa,inad->inxd", d_tan, _angle_jacobian(basis_n))
+    d_rot = jnp.einsum(
+        "kija,kad->kijd", d_rot, _angle_jacobian(basis_k), precision=MATMUL_PRECISION
+    )
+    d_tan = jnp.einsum(
+        "inxa,inad->inxd", d_tan, _angle_jacobian(basis_n), precision=MATMUL_PRECISION
+    )
     ell = length + model.elongation(q)
     pos, moment = _tangent_sums(h, weights, tangents, node_weights)
     d_pos, d_moment = jax.vmap(
@@ -432,7 +437,10 @@ def segment_knot_curvature(
         return jax.hessian(f)(jnp.stack([theta, phi]))
 
     def tan_term(theta, beta_p):
-        f = lambda x: jnp.dot(beta_p, model.plane_rotation_tangent(x[0], x[1])[1])  # noqa: E731
+        def f(x):
+            rotation_tangent = model.plane_rotation_tangent(x[0], x[1])[1]
+            return jnp.dot(beta_p, rotation_tangent, precision=MATMUL_PRECISION)
+
         x = jnp.stack([theta, phi])
         return jax.hessian(f)(x), jax.grad(f)(x)
 
@@ -441,10 +449,12 @@ def segment_knot_curvature(
     a_k = _angle_jacobian(basis_k)
     a_n = _angle_jacobian(basis_n)
     ell = length + model.elongation(q)
-    hessian = jnp.einsum("kai,kab,kbj->ij", a_k, h_rot, a_k)
-    hessian = hessian + ell * jnp.einsum("nmai,nmab,nmbj->ij", a_n, h_tan, a_n)
+    hessian = jnp.einsum("kai,kab,kbj->ij", a_k, h_rot, a_k, precision=MATMUL_PRECISION)
+    hessian = hessian + ell * jnp.einsum(
+        "nmai,nmab,nmbj->ij", a_n, h_tan, a_n, precision=MATMUL_PRECISION
+    )
     # d2 / d dL dq of ell x: the first derivative of the tangent sum.
-    cross = jnp.einsum("nma,nmai->i", g_tan, a_n)
+    cross = jnp.einsum("nma,nmai->i", g_tan, a_n, precision=MATMUL_PRECISION)
     hessian = hessian.at[-1, :].add(cross).at[:, -1].add(cross)
     return hessian
 

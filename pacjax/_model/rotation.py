@@ -9,6 +9,8 @@ branch never produces a NaN gradient.
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
+from .._config import MATMUL_PRECISION
+
 # Below this squared angle the kernels use their series (4 terms: truncation error < 1e-18).
 _SERIES_THRESHOLD = 1e-3
 
@@ -87,9 +89,9 @@ def matmul3(a: Float[Array, "*b 3 3"], b: Float[Array, "*b 3 3"]) -> Float[Array
     (A multiply-and-sum form was tried for XLA:CPU batching; its float32 Hessian crashed XLA
     with a segmentation fault, so this stays a plain matmul.)
     """
-    return a @ b
+    return jnp.matmul(a, b, precision=MATMUL_PRECISION)
 
 
 def matvec3(a: Float[Array, "*b 3 3"], v: Float[Array, "*b 3"]) -> Float[Array, "*b 3"]:
     """``a @ v`` for stacks of 3x3 matrices and vectors."""
-    return jnp.einsum("...ij,...j->...i", a, v)
+    return jnp.einsum("...ij,...j->...i", a, v, precision=MATMUL_PRECISION)

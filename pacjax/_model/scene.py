@@ -12,6 +12,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from .._config import MATMUL_PRECISION
 from .energy import elastic_energy, mass_beyond, moment_cotangent, robot_section_stiffness
 from .energy_plan import EnergyPlan, Indexed
 from .kinematics import (
@@ -451,9 +452,11 @@ class Scene(eqx.Module):
             accel = plan.gravity.acceleration.astype(dtype)
             # The body's first mass moment sum_i int rho A L p ds (kg m), by parts.
             body = jnp.sum(consts.body_mass[:, None] * base_pos + matvec3(base_rot, moment), axis=0)
-            energy = energy - body @ accel
+            energy = energy - jnp.matmul(body, accel, precision=MATMUL_PRECISION)
             for pm, k in zip(plan.point_masses, plan.mass_ids, strict=True):
-                energy = energy - pm.mass.astype(dtype) * (pos_at[k] @ accel)
+                energy = energy - pm.mass.astype(dtype) * jnp.dot(
+                    pos_at[k], accel, precision=MATMUL_PRECISION
+                )
         if plan.routing is not None:
             if parts is not None:
                 lengths = jnp.sum(parts, axis=0)
@@ -489,7 +492,7 @@ class Scene(eqx.Module):
         for k, m in enumerate(moments, start=len(followers)):
             moment = m.moment.astype(dtype)
             if m.follower:
-                moment = rot[k] @ moment
+                moment = jnp.matmul(rot[k], moment, precision=MATMUL_PRECISION)
             cot_rot = cot_rot.at[k].set(moment_cotangent(moment, rot[k]))
         (generalised,) = pullback((cot_rot, cot_pos))
         return generalised

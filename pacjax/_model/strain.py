@@ -20,6 +20,7 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
+from .._config import MATMUL_PRECISION
 from .rotation import rot_z
 
 _FRAMES = ("torsion_free", "paper")
@@ -312,7 +313,11 @@ class PolynomialCurvature(StrainModel):
         n = self.order + 1
         # cumprod, not s ** arange: the derivative of s ** 0 is NaN at s = 0.
         powers = jnp.cumprod(jnp.concatenate([jnp.ones(1, q.dtype), jnp.full(n - 1, s, q.dtype)]))
-        kx = jnp.dot(q[:n], powers)
-        ky = jnp.dot(q[n : 2 * n], powers)
-        tw = jnp.dot(q[2 * n : 3 * n], powers) if self.twist else jnp.zeros_like(kx)
+        kx = jnp.dot(q[:n], powers, precision=MATMUL_PRECISION)
+        ky = jnp.dot(q[n : 2 * n], powers, precision=MATMUL_PRECISION)
+        tw = (
+            jnp.dot(q[2 * n : 3 * n], powers, precision=MATMUL_PRECISION)
+            if self.twist
+            else jnp.zeros_like(kx)
+        )
         return jnp.stack([-ky, kx, tw])

@@ -17,6 +17,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from .._config import MATMUL_PRECISION
 from .robot import as_float, check_finite, check_positive, check_scalar, float_field
 
 MODES = ("length", "tension")
@@ -290,8 +291,10 @@ def _chord_ends(rot, pos, chords: dict, base: bool = True):
     which ``base=False`` leaves out (the map applied to derivatives of the frames)."""
 
     def ends(pick, offset):
-        r = jnp.einsum("ck,kij->cij", pick, rot)
-        return jnp.einsum("ck,ki->ci", pick, pos) + jnp.einsum("cij,cj->ci", r, offset)
+        r = jnp.einsum("ck,kij->cij", pick, rot, precision=MATMUL_PRECISION)
+        return jnp.einsum("ck,ki->ci", pick, pos, precision=MATMUL_PRECISION) + jnp.einsum(
+            "cij,cj->ci", r, offset, precision=MATMUL_PRECISION
+        )
 
     start = ends(chords["pick_a"], chords["offset_a"])
     if base:
@@ -309,7 +312,11 @@ def segment_tendon_parts(rot, pos, chords: dict) -> Float[Array, " m"]:
     """Each tendon's length (m) inside one segment, from the segment's local knot frames
     (``rot`` (k, 3, 3), ``pos`` (k, 3)) and its :meth:`LocalChords.inputs` row."""
     mask = chords["mask"]
-    return (mask * _chord_lengths(*_chord_ends(rot, pos, chords), mask)) @ chords["tendon"]
+    return jnp.matmul(
+        mask * _chord_lengths(*_chord_ends(rot, pos, chords), mask),
+        chords["tendon"],
+        precision=MATMUL_PRECISION,
+    )
 
 
 class ChordDerivatives(eqx.Module):
@@ -332,11 +339,11 @@ class ChordDerivatives(eqx.Module):
         ``d2 l = C^T (I - u u^T) C / l + u . d2c``, and ``d2c`` is linear in the frames'
         second derivatives (the chord ends are affine in the frames).
         """
-        lam_c = chords["mask"] * (chords["tendon"] @ lam)
+        lam_c = chords["mask"] * (jnp.matmul(chords["tendon"], lam, precision=MATMUL_PRECISION))
         w = lam_c / self.length
-        hessian = jnp.einsum("c,cit,cis->ts", w, self.d_chord, self.d_chord) - jnp.einsum(
-            "c,ct,cs->ts", w, self.d_length, self.d_length
-        )
+        hessian = jnp.einsum(
+            "c,cit,cis->ts", w, self.d_chord, self.d_chord, precision=MATMUL_PRECISION
+        ) - jnp.einsum("c,ct,cs->ts", w, self.d_length, self.d_length, precision=MATMUL_PRECISION)
         force = lam_c[:, None] * self.unit
         _, pull = jax.vjp(lambda r, p: _chord_ends(r, p, chords, base=False), rot, pos)
         g_rot, g_pos = pull((-force, force))
@@ -355,10 +362,10 @@ def tendon_parts_derivatives(rot, pos, d_rot, d_pos, chords: dict) -> ChordDeriv
         lambda r, p: _chord_ends(r, p, chords, base=False), in_axes=-1, out_axes=-1
     )(d_rot, d_pos)
     d_chord = d_end - d_start
-    d_length = mask[:, None] * jnp.einsum("ci,cit->ct", unit, d_chord)
+    d_length = mask[:, None] * jnp.einsum("ci,cit->ct", unit, d_chord, precision=MATMUL_PRECISION)
     return ChordDerivatives(
-        parts=(mask * length) @ chords["tendon"],
-        jacobian=jnp.einsum("ct,cm->mt", d_length, chords["tendon"]),
+        parts=jnp.matmul(mask * length, chords["tendon"], precision=MATMUL_PRECISION),
+        jacobian=jnp.einsum("ct,cm->mt", d_length, chords["tendon"], precision=MATMUL_PRECISION),
         unit=unit,
         length=length,
         d_chord=d_chord,

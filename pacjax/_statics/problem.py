@@ -6,6 +6,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._config import MATMUL_PRECISION
 from .._model.hessian import dead_followers, energy_derivatives, follower_jacobian
 from .._model.scene import Scene, SceneConstants
 
@@ -132,8 +133,8 @@ class ScaledProblem(eqx.Module):
         dq = (self.sigma * dy).reshape(n, d)
         beta = self.scene.model.plane_angle_basis(jnp.ones((), y.dtype))
         c, dc, dphi = q[:, :k], dq[:, :k], dq[:, k]
-        theta = c @ beta
-        ahead = theta + dc @ beta
+        theta = jnp.matmul(c, beta, precision=MATMUL_PRECISION)
+        ahead = theta + jnp.matmul(dc, beta, precision=MATMUL_PRECISION)
         # The angle of B' from e(phi), in (-pi/2, pi/2]: arctan(theta dphi / (theta + dtheta)).
         turn = jnp.arctan2(theta * dphi * jnp.where(ahead < 0, -1.0, 1.0), jnp.abs(ahead))
         c_new = (c + dc) * jnp.cos(turn)[:, None] + c * (dphi * jnp.sin(turn))[:, None]

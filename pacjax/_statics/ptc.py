@@ -26,6 +26,7 @@ import jax.numpy as jnp
 import optimistix as optx
 from jaxtyping import Array, Bool, Float, Int
 
+from .._config import MATMUL_PRECISION
 from .._results import MAX_STEPS_REACHED, NONFINITE, STALLED, SUCCESSFUL
 from . import linalg as _linalg
 
@@ -86,7 +87,7 @@ def stiffness_modes(jac, weights, size, tol):
     k = (weights[:, None] * jac) / weights[None, :]
     eigvals, eigvecs = _linalg.eigh(0.5 * (k + k.T))
     unstable = (eigvals < -tol).at[0].set(True)
-    dy = (eigvecs @ jnp.where(unstable, 1.0, 0.0)) / weights
+    dy = (jnp.matmul(eigvecs, jnp.where(unstable, 1.0, 0.0), precision=MATMUL_PRECISION)) / weights
     dy = size * dy / jnp.maximum(max_abs(dy), jnp.finfo(dy.dtype).tiny)
     return eigvals, eigvecs, dy
 
@@ -158,9 +159,9 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
             # Conservative scene: K is the scaled Hessian. Continuation step with |lambda|
             # ("saddle-free" Newton): full Newton along stable modes, descent along the others.
             w = state.weights
-            rz = state.eigvecs.T @ (w * state.residual)
+            rz = jnp.matmul(state.eigvecs.T, w * state.residual, precision=MATMUL_PRECISION)
             gain = 1.0 / (jnp.abs(state.eigvals) + 1.0 / state.dt)
-            newton = -(state.eigvecs @ (gain * rz)) / w
+            newton = -(jnp.matmul(state.eigvecs, gain * rz, precision=MATMUL_PRECISION)) / w
         else:
             # Non-conservative loads (follower forces, dead moments in 3D): J is not symmetric.
             # Far from a solution, shift it by enough to dominate the negative curvature of its
@@ -212,14 +213,14 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
         elif frozen:
 
             def merit_only(y_):
-                return args.energy(y_) - jnp.dot(state.drive, y_ - y)
+                return args.energy(y_) - jnp.dot(state.drive, y_ - y, precision=MATMUL_PRECISION)
         else:
 
             def merit_only(y_):
                 return fn(y_, args)[1][0]
 
         if self.symmetric or self.frozen_work:
-            slope = jnp.dot(state.weights**2 * state.residual, delta)
+            slope = jnp.dot(state.weights**2 * state.residual, delta, precision=MATMUL_PRECISION)
             scale = jnp.abs(state.merit) + jnp.sum((state.weights * y) ** 2)
             rounding = (slope <= 0) & (-slope <= 64 * eps * scale)
         else:
