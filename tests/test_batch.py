@@ -47,7 +47,7 @@ def test_batch_over_payloads(scene):
 
 
 def test_batch_rejects_bad_shapes(scene):
-    with pytest.raises(ValueError, match="controls must have shape"):
+    with pytest.raises(ValueError, match="controls_batch must have shape"):
         pj.solve_batch(scene, np.zeros((4, 2)))
     with pytest.raises(ValueError, match="q0 must have shape"):
         pj.solve_batch(scene, np.zeros((4, 3)), q0=np.zeros((3, scene.n_dofs)))

@@ -536,7 +536,7 @@ def test_batch_arguments_are_checked():
         pj.solve_batch(scene, np.zeros((2, 2)), chunk_size=0)
     with pytest.raises(TypeError, match="controls_batch must be an array of real numbers"):
         pj.solve_batch(scene, [["a", "b"], ["c", "d"]])
-    with pytest.raises(TypeError, match="controls must be real numbers"):
+    with pytest.raises(TypeError, match="controls must be an array of real numbers"):
         pj.solve_equilibrium(scene, ["a", "b"])
     with pytest.raises(TypeError, match="q0 must be an array of real numbers"):
         pj.solve_equilibrium(scene, [0.0, 0.0], q0=["x"] * 6)

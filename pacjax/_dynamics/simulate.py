@@ -57,6 +57,7 @@ from .._model.inputs import (
     as_traced_leaves,
     check_controls,
     check_q,
+    check_scene,
     solver_dtype,
     static_load_sites,
 )
@@ -340,8 +341,7 @@ def simulate(
     sections 2 and 3 take section 1's plane). Use ``PolynomialCurvature`` (order 1 is PAC's
     affine law in Cartesian form) to simulate motion through straight segments.
     """
-    if not isinstance(scene, Scene):
-        raise TypeError(f"scene must be a pacjax.Scene, got {type(scene).__name__}")
+    check_scene(scene)
     dtype = solver_dtype(scene)
     for i, seg in enumerate(scene.robot.segments):
         density = concrete(seg.linear_density)

@@ -33,6 +33,7 @@ import optax
 
 from .. import _deprecated
 from .._model.frameloads import with_frame_loads
+from .._model.inputs import check_scene
 from .._model.scene import Scene, normalise_sites
 from .._results import RESULTS
 from .._statics.options import SolverOptions, resolve_options
@@ -142,8 +143,7 @@ def identify(
         offsets), and an :class:`IdentificationReport`.
     """
     t_start = time.perf_counter()
-    if not isinstance(scene, Scene):
-        raise TypeError(f"scene must be a pacjax.Scene, got {type(scene).__name__}")
+    check_scene(scene)
     _check(scene, dataset, "dataset")
     if validation is not None and holdout:
         raise ValueError("give either validation= or holdout=, not both")

@@ -46,7 +46,7 @@ import jax.tree_util as jtu
 import numpy as np
 
 from .. import _deprecated
-from .._model.inputs import static_load_sites
+from .._model.inputs import check_scene, static_load_sites
 from .._model.scene import Scene
 from .._statics.batch import solve_batch
 from .._statics.equilibrium import solve_equilibrium
@@ -247,8 +247,7 @@ def inverse_statics(
         An :class:`InverseResult`; ``reached`` is False (and the closest pose found is
         returned) when no start reached the target.
     """
-    if not isinstance(scene, Scene):
-        raise TypeError(f"scene must be a pacjax.Scene, got {type(scene).__name__}")
+    check_scene(scene)
     scene = static_load_sites(scene)
     settings = _settings(scene, _kwargs(kwargs))
     tgt = make_target(scene, target, rotation, orientation_weight, sites)
@@ -340,8 +339,7 @@ def inverse_statics_batch(
     together, up to ``n_starts``. Other options as
     :func:`inverse_statics`. Returns an :class:`InverseResult` with a leading batch axis.
     """
-    if not isinstance(scene, Scene):
-        raise TypeError(f"scene must be a pacjax.Scene, got {type(scene).__name__}")
+    check_scene(scene)
     scene = static_load_sites(scene)
     settings = _settings(scene, _kwargs(kwargs))
     tgt = make_target(scene, targets, rotation, orientation_weight, sites, batched=True)
@@ -481,8 +479,7 @@ def track(
     other starts only if that fails. Neighbouring waypoints close together give small
     Levenberg-Marquardt steps, so the commands vary smoothly (:attr:`Tracking.max_command_jump`).
     """
-    if not isinstance(scene, Scene):
-        raise TypeError(f"scene must be a pacjax.Scene, got {type(scene).__name__}")
+    check_scene(scene)
     kw = _kwargs(kwargs)
     _settings(scene, dict(kw))  # check the options before the first solve
     tgt = make_target(scene, waypoints, rotation, orientation_weight, sites, batched=True)
@@ -523,8 +520,7 @@ def sample_workspace(
     """Forward-solve ``n`` random commands within the bounds (``lower``, ``upper``,
     ``max_contraction`` as :func:`inverse_statics`): the reachable set, and starts for inverse
     solves."""
-    if not isinstance(scene, Scene):
-        raise TypeError(f"scene must be a pacjax.Scene, got {type(scene).__name__}")
+    check_scene(scene)
     if int(n) < 1:
         raise ValueError(f"n must be >= 1, got {n}")
     settings = _settings(scene, _kwargs({**kwargs, "seed": seed}))

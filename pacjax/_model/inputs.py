@@ -11,11 +11,17 @@ from .robot import concrete
 from .scene import Scene
 
 
-def check_controls(scene: Scene, controls, dtype, batched: bool = False) -> jax.Array:
-    """Validate controls against the scene (before any compilation).
+def check_scene(scene) -> None:
+    """Raise a TypeError unless ``scene`` is a :class:`pacjax.Scene`."""
+    if not isinstance(scene, Scene):
+        raise TypeError(f"scene must be a pacjax.Scene, got {type(scene).__name__}")
 
-    A single solve takes exactly ``(n_tendons,)``; a batch ``(batch, n_tendons)``.
-    """
+
+def check_controls(scene: Scene, controls, dtype, batched: bool = False) -> jax.Array:
+    """Controls checked against the scene (before any compilation): real, finite, one per
+    tendon, tensions not negative; ``(n_tendons,)``, or ``(batch, n_tendons)`` when
+    ``batched`` (named ``controls_batch`` then). None: the scene's default controls."""
+    name = "controls_batch" if batched else "controls"
     if controls is None:
         return scene.default_controls(dtype)
     arr = None
@@ -23,13 +29,13 @@ def check_controls(scene: Scene, controls, dtype, batched: bool = False) -> jax.
         try:
             arr = np.asarray(controls, dtype=float)
         except (TypeError, ValueError):
-            raise TypeError(f"controls must be real numbers, got {controls!r}") from None
+            raise TypeError(f"{name} must be an array of real numbers, got {controls!r}") from None
     shape = arr.shape if arr is not None else jnp.shape(controls)
     want = ("batch", scene.n_tendons) if batched else (scene.n_tendons,)
     if len(shape) != len(want) or shape[-1] != scene.n_tendons:
         hint = " (use pacjax.solve_batch for many commands)" if len(shape) > len(want) else ""
         raise ValueError(
-            f"controls must have shape {want} (one per tendon), got {shape}{hint}".replace(
+            f"{name} must have shape {want} (one per tendon), got {shape}{hint}".replace(
                 "'batch'", "batch"
             )
         )
@@ -44,21 +50,36 @@ def check_controls(scene: Scene, controls, dtype, batched: bool = False) -> jax.
     return jnp.asarray(controls, dtype)
 
 
-def check_q(scene: Scene, q, dtype) -> jax.Array:
+def check_q(
+    scene: Scene, q, dtype, *, name: str = "q0", rows: int | None = None, start: bool = True
+):
+    """Coordinates checked against the scene (before any compilation): real, finite,
+    ``(n_dofs,)``, or also ``(rows, n_dofs)`` when ``rows`` is given (returned broadcast to it,
+    as numpy). A ``start`` of a solve must not contract a segment to its stop. None: straight
+    (a batch: None)."""
     if q is None:
-        return scene.zeros(dtype)
-    if not isinstance(q, jax.core.Tracer):
+        return scene.zeros(dtype) if rows is None else None
+    traced = isinstance(q, jax.core.Tracer)
+    if not traced:
         try:
+            if isinstance(q, (str, bytes)):
+                raise TypeError
             q = np.asarray(q, dtype=float)
         except (TypeError, ValueError):
-            raise TypeError(f"q0 must be an array of real numbers, got {q!r}") from None
-    shape = np.shape(q) if not isinstance(q, jax.core.Tracer) else jnp.shape(q)
-    if shape != (scene.n_dofs,):
-        raise ValueError(f"q0 must have shape ({scene.n_dofs},), got {shape}")
-    if not isinstance(q, jax.core.Tracer):
-        if not np.all(np.isfinite(np.asarray(q, float))):
-            raise ValueError("q0 contains NaN or infinite values")
-        check_start_contraction(scene, np.asarray(q, float)[None])
+            raise TypeError(f"{name} must be an array of real numbers, got {q!r}") from None
+    shape = jnp.shape(q)
+    want = [(scene.n_dofs,)] if rows is None else [(scene.n_dofs,), (rows, scene.n_dofs)]
+    if shape not in want:
+        hint = " (one configuration; vmap for several)" if rows is None and len(shape) > 1 else ""
+        shapes = " or ".join(str(w) for w in want)
+        raise ValueError(f"{name} must have shape {shapes}{hint}, got {shape}")
+    if not traced:
+        if not np.all(np.isfinite(q)):
+            raise ValueError(f"{name} contains NaN or infinite values")
+        if start:
+            check_start_contraction(scene, q.reshape(-1, scene.n_dofs))
+    if rows is not None:
+        return np.broadcast_to(q, (rows, scene.n_dofs))
     return jnp.asarray(q, dtype)
 
 

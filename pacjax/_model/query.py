@@ -1,12 +1,12 @@
 """Kinematic queries on a solved (or any) configuration: backbone, markers, tip pose."""
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 import jax.tree_util as jtu
 import numpy as np
 from jaxtyping import Array, Float
 
+from .inputs import check_controls, check_q, check_scene
 from .rotation import matvec3
 from .scene import Scene, normalise_sites
 
@@ -18,31 +18,14 @@ def _frames(scene: Scene, q, segments: tuple[int, ...], s: tuple[float, ...], of
     return pos + matvec3(rot, offsets.astype(q.dtype)), rot
 
 
-def _check_scene(scene) -> None:
-    if not isinstance(scene, Scene):
-        raise TypeError(f"scene must be a pacjax.Scene, got {type(scene).__name__}")
-
-
 def _configuration(scene: Scene, q) -> Array:
-    """``q`` checked against the scene (before any compilation): shape, real, finite."""
-    _check_scene(scene)
-    if isinstance(q, (str, bytes)) or q is None:
-        raise TypeError(f"q must be an array of {scene.n_dofs} coordinates, got {q!r}")
-    if not isinstance(q, jax.Array):
-        try:
-            q = np.asarray(q, dtype=float)
-        except (TypeError, ValueError):
-            raise TypeError(f"q must be an array of real numbers, got {q!r}") from None
-    if np.shape(q) != (scene.n_dofs,):
-        raise ValueError(
-            f"q must have shape ({scene.n_dofs},) (one configuration; vmap for several), "
-            f"got {np.shape(q)}"
-        )
-    if not jnp.issubdtype(q.dtype, jnp.floating):
-        q = jnp.asarray(q, float)
-    if not isinstance(q, jax.core.Tracer) and not np.all(np.isfinite(np.asarray(q))):
-        raise ValueError("q contains NaN or infinite values")
-    return jnp.asarray(q)
+    """``q`` checked against the scene (before any compilation): shape, real, finite; a
+    floating ``q`` keeps its dtype."""
+    check_scene(scene)
+    if q is None:
+        raise TypeError(f"q must be an array of {scene.n_dofs} coordinates, got None")
+    floating = hasattr(q, "dtype") and jnp.issubdtype(q.dtype, jnp.floating)
+    return check_q(scene, q, q.dtype if floating else None, name="q", start=False)
 
 
 def site_frames(scene: Scene, q, segments, s, offsets=None):
@@ -61,7 +44,7 @@ def backbone(
     Points are spaced evenly in the normalised coordinate ``segment + s`` from the base to the
     tip (both included), in the world frame.
     """
-    _check_scene(scene)
+    check_scene(scene)
     if isinstance(n_points, (bool, np.bool_)) or not isinstance(n_points, (int, np.integer)):
         raise TypeError(f"n_points must be an integer, got {n_points!r}")
     if n_points < 2:
@@ -78,7 +61,7 @@ def markers(scene: Scene, q: Float[Array, " n_dofs"], sites=None) -> Float[Array
 
     Default: the scene's own ``markers``.
     """
-    _check_scene(scene)
+    check_scene(scene)
     sites = scene.markers if sites is None else normalise_sites(sites, scene.n_segments)
     if not sites:
         raise ValueError("no marker sites: pass sites= or build the scene with markers=")
@@ -110,20 +93,7 @@ def astype(tree, dtype):
 def tendon_tensions(scene: Scene, q, controls) -> Float[Array, " m"]:
     """Tension (N) in every tendon at ``q`` under ``controls``."""
     q = _configuration(scene, q)
-    if not isinstance(controls, jax.Array):
-        try:
-            controls = np.asarray(controls, dtype=float)
-        except (TypeError, ValueError):
-            raise TypeError(
-                f"controls must be an array of real numbers, got {controls!r}"
-            ) from None
-    if np.shape(controls) != (scene.n_tendons,):
-        raise ValueError(
-            f"controls must have shape ({scene.n_tendons},) (one per tendon), "
-            f"got {np.shape(controls)}"
-        )
-    if not isinstance(controls, jax.core.Tracer) and not np.all(np.isfinite(np.asarray(controls))):
-        raise ValueError("controls contain NaN or infinite values")
+    controls = check_controls(scene, controls, q.dtype)
     if not scene.tendons:
         return jnp.zeros((0,), q.dtype)
     return _tensions(scene, q, jnp.asarray(controls, q.dtype))

@@ -28,7 +28,8 @@ from .._jit import jit
 from .._model.inputs import (
     as_traced_leaves,
     check_controls,
-    check_start_contraction,
+    check_q,
+    check_scene,
     solver_dtype,
     static_load_sites,
 )
@@ -87,8 +88,7 @@ def iter_batch(
     Memory stays bounded by the chunk size whatever the batch size: write each chunk out and
     drop it. Arguments as :func:`solve_batch`.
     """
-    if not isinstance(scene, Scene):
-        raise TypeError(f"scene must be a pacjax.Scene, got {type(scene).__name__}")
+    check_scene(scene)
     if isinstance(chunk_size, bool) or not isinstance(chunk_size, (int, np.integer)):
         raise TypeError(f"chunk_size must be an integer, got {chunk_size!r}")
     if chunk_size < 1:
@@ -96,28 +96,11 @@ def iter_batch(
     opts = resolve_options(options, **overrides)
     dtype = solver_dtype(scene)
     scene = static_load_sites(as_traced_leaves(scene, dtype))
-    try:
-        controls_batch = np.asarray(controls_batch, dtype=float)
-    except (TypeError, ValueError):
-        raise TypeError("controls_batch must be an array of real numbers") from None
-    if controls_batch.ndim != 2:
-        raise ValueError(
-            f"controls_batch must have shape (batch, {scene.n_tendons}), got {controls_batch.shape}"
-        )
-    check_controls(scene, controls_batch, dtype, batched=True)
+    controls_batch = np.asarray(check_controls(scene, controls_batch, dtype, batched=True))
     n = controls_batch.shape[0]
     if n == 0:
         raise ValueError("controls_batch is empty")
-    if q0 is not None:
-        q0 = np.asarray(q0, dtype=float)
-        if q0.shape not in ((scene.n_dofs,), (n, scene.n_dofs)):
-            raise ValueError(
-                f"q0 must have shape ({scene.n_dofs},) or ({n}, {scene.n_dofs}), got {q0.shape}"
-            )
-        if not np.all(np.isfinite(q0)):
-            raise ValueError("q0 contains NaN or infinite values")
-        check_start_contraction(scene, q0.reshape(-1, scene.n_dofs))
-        q0 = np.broadcast_to(q0, (n, scene.n_dofs))
+    q0 = check_q(scene, q0, dtype, rows=n)
     if params is not None:
         if update is None:
             raise ValueError("params= needs update=(scene, row_of_params) -> scene")

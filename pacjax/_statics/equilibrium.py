@@ -34,6 +34,7 @@ from .._model.inputs import (
     as_traced_leaves,
     check_controls,
     check_q,
+    check_scene,
     solver_dtype,
     static_load_sites,
 )
@@ -180,8 +181,7 @@ def solve_equilibrium(
         An :class:`Equilibrium`. Differentiable with respect to the scene's parameters and the
         controls (implicit function theorem); ``jit``/``vmap`` compatible.
     """
-    if not isinstance(scene, Scene):
-        raise TypeError(f"scene must be a pacjax.Scene, got {type(scene).__name__}")
+    check_scene(scene)
     opts = resolve_options(options, **overrides)
     dtype = solver_dtype(scene)
     scene = static_load_sites(as_traced_leaves(scene, dtype))

@@ -20,6 +20,7 @@ import jax.tree_util as jtu
 import numpy as np
 from jaxtyping import Array, Int
 
+from .._model.inputs import check_controls, check_scene, solver_dtype
 from .._model.scene import Scene
 from .._results import RESULTS
 from .batch import solve_batch
@@ -167,8 +168,7 @@ def find_equilibria(
     Returns:
         :class:`Equilibria`, lowest energy first.
     """
-    if not isinstance(scene, Scene):
-        raise TypeError(f"scene must be a pacjax.Scene, got {type(scene).__name__}")
+    check_scene(scene)
     n_starts = _check_int("n_starts", n_starts, 1)
     seed = _check_int("seed", seed, 0)
     if isinstance(spread, bool) or not np.isscalar(spread) or not np.isfinite(spread):
@@ -177,13 +177,7 @@ def find_equilibria(
         raise ValueError(f"spread must be a finite number > 0, got {spread!r}")
     if distance_tol is not None and not (np.isscalar(distance_tol) and distance_tol > 0):
         raise ValueError(f"distance_tol must be a number > 0, got {distance_tol!r}")
-    if controls is None:
-        controls = np.zeros(scene.n_tendons)
-    controls = np.asarray(controls, dtype=float)
-    if controls.shape != (scene.n_tendons,):
-        raise ValueError(
-            f"controls must have shape ({scene.n_tendons},) (one per tendon), got {controls.shape}"
-        )
+    controls = np.asarray(check_controls(scene, controls, solver_dtype(scene)))
     options.setdefault("fallback", False)
     starts = random_starts(scene, n_starts, seed, float(spread), include_straight)
     batch = solve_batch(scene, np.tile(controls, (n_starts, 1)), starts, escapes=escapes, **options)

@@ -44,6 +44,7 @@ import numpy as np
 
 import pacjax as pj
 
+from .._model.inputs import check_scene
 from .._results import code_of
 
 SAMPLERS = ("uniform", "lhs", "grid")
@@ -62,8 +63,7 @@ def default_ranges(scene: pj.Scene) -> tuple[np.ndarray, np.ndarray]:
     :data:`PULL_IN_FRACTION` of the spanned length for length-mode tendons (m), zero up to the
     tension that bends the anchor segment by :data:`TENSION_BEND_ANGLE` for tension-mode ones
     (N)."""
-    if not isinstance(scene, pj.Scene):
-        raise TypeError(f"scene must be a pacjax.Scene, got {type(scene).__name__}")
+    check_scene(scene)
     if scene.n_tendons == 0:
         raise ValueError("the scene has no tendons: there are no commands to sample")
     lengths = [float(seg.length) for seg in scene.robot.segments]
