@@ -15,7 +15,6 @@ XLA runs the shards in parallel. In a multi-host run (``jax.distributed.initiali
 process passes the rows it owns and shards them over its own devices; see docs/multihost.md.
 """
 
-import dataclasses
 from collections.abc import Callable, Iterator
 
 import jax
@@ -34,7 +33,7 @@ from .._model.inputs import (
     static_load_sites,
 )
 from .._model.scene import Scene
-from .continuation import conservative_part, load_continuation, order_continuation, order_step
+from .continuation import conservative_part, retry_failed
 from .equilibrium import solve_core
 from .options import SolverOptions, resolve_options
 from .pool import pad_rows, pool_lanes, pool_slots, pool_solve
@@ -211,52 +210,19 @@ def _run_chunk(scene, u, q, p, update, opts, chunk, dtype, sharding, conservativ
 
 
 def _retry_failed(scene, u, q, p, update, opts, eq, dtype, flow=True):
-    """Re-solve the rows that failed, keeping whichever converged: for a non-conservative scene
-    first by load continuation (from the equilibrium of its conservative part, see
-    :func:`pacjax._statics.continuation.conservative_part`), for ``PolynomialCurvature`` of order
-    >= 2 by order continuation (from the equilibrium one order lower, itself retried the same way,
-    see :func:`pacjax._statics.continuation.order_step`), then, with ``flow``, with the diffrax
-    flow."""
+    """The failed rows of a chunk (controls ``u``, starts ``q``, row parameters ``p``) solved
+    again by :func:`pacjax._statics.continuation.retry_failed`."""
 
-    def rows_of(x, rows):
-        return None if x is None else jtu.tree_map(lambda a: a[rows], x)
-
-    def solve_rows(rows, starts, options, conservative=False, sc=scene):
+    def solve_rows(rows, starts, options, conservative=False, scene=scene):
         # Padded to a power of two: a batch with a varying number of failures compiles the
         # retry a few times, not once per count.
         size = 1 << (len(rows) - 1).bit_length()
+        p_rows = None if p is None else jtu.tree_map(lambda a: a[rows], p)
         return _run_chunk(
-            sc, u[rows], starts, rows_of(p, rows), update, options, size, dtype, None, conservative
+            scene, u[rows], starts, p_rows, update, options, size, dtype, None, conservative
         )
 
-    def merge(eq, rows, retry):
-        better = np.asarray(retry.converged)
-        if not better.any():
-            return eq
-        return jtu.tree_map(lambda a, b: a.at[rows[better]].set(b[better]), eq, retry)
-
-    if np.all(np.asarray(eq.converged)):
-        return eq
-    if not scene.is_conservative:
-        bad = np.flatnonzero(~np.asarray(eq.converged))
-        retry = load_continuation(lambda cons, start: solve_rows(bad, start, opts, cons), q[bad])
-        eq = merge(eq, bad, retry)
-    step = order_step(scene)
-    bad = np.flatnonzero(~np.asarray(eq.converged))
-    if step is not None and bad.size:
-
-        def solve_low(start):
-            low = solve_rows(bad, start, opts, sc=step.scene)
-            return _retry_failed(
-                step.scene, u[bad], start, rows_of(p, bad), update, opts, low, dtype, flow=False
-            )
-
-        retry = order_continuation(step, solve_low, lambda s: solve_rows(bad, s, opts), q[bad])
-        eq = merge(eq, bad, retry)
-    bad = np.flatnonzero(~np.asarray(eq.converged))
-    if flow and bad.size:
-        eq = merge(eq, bad, solve_rows(bad, q[bad], dataclasses.replace(opts, method="flow")))
-    return eq
+    return retry_failed(scene, eq, q, solve_rows, opts, flow)
 
 
 def solve_batch(

@@ -1,7 +1,9 @@
 """Retries for a failed equilibrium: load continuation (non-conservative loads switched on from
-the equilibrium without them) and order continuation (``PolynomialCurvature`` from the
-equilibrium one order lower). :func:`pacjax.solve_equilibrium` and the batch solver's retries
-pass their own ``solve`` functions."""
+the equilibrium without them), order continuation (``PolynomialCurvature`` from the equilibrium
+one order lower) and the diffrax flow, in that order (:func:`retry_failed`), for single and
+batched solves alike: each passes its own ``solve``."""
+
+import dataclasses
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -98,13 +100,49 @@ def order_continuation(step: OrderStep, solve_low, solve, q0) -> Equilibrium:
     return eqx.tree_at(lambda e: e.steps, eq, eq.steps + low.steps)
 
 
-def keep_better(eq: Equilibrium, retry: Equilibrium) -> Equilibrium:
-    """``retry`` where it converged and ``eq`` did not (elementwise for a batch)."""
-    better = np.asarray(retry.converged) & ~np.asarray(eq.converged)
-    if not np.any(better):
+def retry_failed(scene: Scene, eq: Equilibrium, starts, solve, options, flow: bool = True):
+    """The rows of ``eq`` (a batch) that failed, solved again, each retry kept where it
+    converged: for a non-conservative scene first by load continuation (from the equilibrium of
+    its conservative part, :func:`conservative_part`), for ``PolynomialCurvature`` of order >= 2
+    by order continuation (from the equilibrium one order lower, itself retried the same way
+    without the flow, :func:`order_step`), then, with ``flow``, with the diffrax flow
+    (``method="flow"``).
+
+    ``solve(rows, starts, options, conservative=False, scene=scene)`` solves those rows of the
+    batch (an index array) from ``starts`` (one per row), with the scene's conservative part
+    when ``conservative``; ``starts`` (rows, n_dofs) are the rows' first starts.
+    """
+
+    def failed(eq):
+        return np.flatnonzero(~np.asarray(eq.converged))
+
+    bad = failed(eq)
+    if bad.size and not scene.is_conservative:
+        retry = load_continuation(lambda cons, start: solve(bad, start, options, cons), starts[bad])
+        eq = _merge(eq, bad, retry)
+    step = order_step(scene)
+    bad = failed(eq)
+    if step is not None and bad.size:
+
+        def solve_low(start, bad=bad):
+            def solve_subset(rows, s, o, conservative=False, scene=step.scene):
+                return solve(bad[rows], s, o, conservative, scene)
+
+            low = solve_subset(np.arange(bad.size), start, options)
+            return retry_failed(step.scene, low, start, solve_subset, options, flow=False)
+
+        retry = order_continuation(step, solve_low, lambda s: solve(bad, s, options), starts[bad])
+        eq = _merge(eq, bad, retry)
+    bad = failed(eq)
+    if flow and bad.size:
+        flow_options = dataclasses.replace(options, method="flow")
+        eq = _merge(eq, bad, solve(bad, starts[bad], flow_options))
+    return eq
+
+
+def _merge(eq: Equilibrium, rows, retry: Equilibrium) -> Equilibrium:
+    """``eq`` with its ``rows`` replaced by ``retry``'s where the retry converged."""
+    better = np.asarray(retry.converged)
+    if not better.any():
         return eq
-    return jtu.tree_map(lambda a, b: jnp.where(_bcast(better, a), a, b), retry, eq)
-
-
-def _bcast(mask, x):
-    return mask.reshape(mask.shape + (1,) * (x.ndim - mask.ndim))
+    return jtu.tree_map(lambda a, b: jnp.asarray(a).at[rows[better]].set(b[better]), eq, retry)

@@ -20,11 +20,10 @@ undefined) is detected from the smallest eigenvalue of the scaled stiffness and,
 along its direction of negative curvature.
 """
 
-import dataclasses
-
 import diffrax
 import jax
 import jax.numpy as jnp
+import jax.tree_util as jtu
 import lineax as lx
 import numpy as np
 import optimistix as optx
@@ -40,13 +39,7 @@ from .._model.inputs import (
 )
 from .._model.scene import Scene
 from .._results import from_code
-from .continuation import (
-    conservative_part,
-    keep_better,
-    load_continuation,
-    order_continuation,
-    order_step,
-)
+from .continuation import conservative_part, retry_failed
 from .options import SolverOptions, resolve_options
 from .problem import ScaledProblem, flow_field
 from .ptc import PseudoTransientContinuation, final_code, max_abs
@@ -188,30 +181,25 @@ def solve_equilibrium(
     controls = check_controls(scene, controls, dtype)
     q0 = check_q(scene, q0, dtype)
     eq = _solve(scene, controls, q0, opts)
-    if opts.method == "ptc" and not _is_traced(eq.converged):
-        if not bool(np.all(eq.converged)) and not scene.is_conservative:
-
-            def solve(conservative, start):
-                sc = conservative_part(scene) if conservative else scene
-                return _solve(sc, controls, start, opts)
-
-            eq = keep_better(eq, load_continuation(solve, q0))
-        step = order_step(scene)
-        if step is not None and not bool(np.all(eq.converged)):
-            retry = order_continuation(
-                step,
-                lambda start: solve_equilibrium(
-                    step.scene, controls, start, fallback=False, options=opts
-                ),
-                lambda start: _solve(scene, controls, jnp.asarray(start, dtype), opts),
-                np.asarray(q0),
-            )
-            eq = keep_better(eq, retry)
-        if fallback and not bool(np.all(eq.converged)):
-            eq = keep_better(
-                eq, _solve(scene, controls, q0, dataclasses.replace(opts, method="flow"))
-            )
+    if opts.method == "ptc" and not _is_traced(eq.converged) and not bool(eq.converged):
+        eq = _retry(scene, controls, q0, eq, opts, fallback)
     return eq
+
+
+def _retry(scene: Scene, controls, q0, eq: Equilibrium, opts: SolverOptions, fallback: bool):
+    """A failed single solve retried as a batch of one row
+    (:func:`pacjax._statics.continuation.retry_failed`; the flow only with ``fallback``)."""
+
+    def one_row(x):
+        return jtu.tree_map(lambda a: jnp.asarray(a)[None], x)
+
+    def solve(rows, starts, options, conservative=False, scene=scene):
+        sc = conservative_part(scene) if conservative else scene
+        return one_row(_solve(sc, controls, jnp.asarray(starts[0], q0.dtype), options))
+
+    starts = np.asarray(q0)[None]
+    retried = retry_failed(scene, one_row(eq), starts, solve, opts, flow=fallback)
+    return jtu.tree_map(lambda a: a[0], retried)
 
 
 def _is_traced(x) -> bool:
