@@ -25,6 +25,8 @@ frames; :func:`pacjax._model.tendons.tendon_parts_derivatives`), and their pull 
 the frames' curvature term: differentiating through the chords took a third of the time.
 """
 
+from typing import Any, NamedTuple
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -63,6 +65,60 @@ def elastic_hessian(
     return jax.scipy.linalg.block_diag(*[columns[:, i].T for i in range(n)])
 
 
+class _Linearised(NamedTuple):
+    """Each segment's local kinematics ``L_i`` and its Jacobian ``J_i``, and the frames at
+    traced load sites (their own ``L`` and ``J``)."""
+
+    frame_inputs: tuple  # the per-segment inputs of the frames (Scene.segment_inputs)
+    chords: Any  # the chords' inputs, or None
+    frames: tuple  # every knot frame per segment: (rotations, positions)
+    chord_derivatives: Any  # tendon parts and their derivatives, or None
+    values: tuple  # L_i: (rotations, positions, moments, tendon parts or None)
+    jacobians: tuple  # J_i, leaf by leaf
+    traced_sites: tuple  # segment of each traced load site
+    traced_values: tuple
+    traced_jacobians: tuple
+
+
+def _linearise(scene: Scene, coords, plan, consts, dtype) -> _Linearised:
+    """``L_i`` and ``J_i`` of every segment: the frames by forward derivatives, and the tendon
+    parts (when every chord lies in one segment) written out from the frames'
+    (:func:`pacjax._model.tendons.tendon_parts_derivatives`): as automatic derivatives through
+    the chords they were a third of :func:`energy_derivatives`' time."""
+    *frame_inputs, chords = scene.segment_inputs(plan, consts, dtype)
+    f_jac, f_val = jax.vmap(scene.segment_frames_jacobian)(coords, *frame_inputs)
+    chord_d = None
+    if chords is not None:
+        chord_d = jax.vmap(lambda v, j, ch: tendon_parts_derivatives(v[0], v[1], j[0], j[1], ch))(
+            f_val, f_jac, chords
+        )
+    traced = [
+        jacobian_and_value(lambda y, k=k, s_k=s_k: scene.traced_local_frame(y, k, s_k), coords[k])
+        for k, s_k in plan.points.traced
+    ]
+    return _Linearised(
+        frame_inputs=tuple(frame_inputs),
+        chords=chords,
+        frames=(f_val[0], f_val[1]),
+        chord_derivatives=chord_d,
+        values=(*f_val, None if chord_d is None else chord_d.parts),
+        jacobians=(*f_jac, None if chord_d is None else chord_d.jacobian),
+        traced_sites=tuple(k for k, _ in plan.points.traced),
+        traced_values=tuple(v for _, v in traced),
+        traced_jacobians=tuple(j for j, _ in traced),
+    )
+
+
+def _on_load_rows(plan, x: tuple) -> tuple:
+    """The frames (and their derivatives) of ``x`` at the knot rows that ``Psi`` reads."""
+    runs = index_runs(plan.load_rows)
+
+    def rows(y):
+        return jnp.concatenate([y[:, a:b] for a, b in runs], axis=1)
+
+    return (rows(x[0]), rows(x[1]), *x[2:])
+
+
 def energy_derivatives(
     scene: Scene, q: Float[Array, " n_dofs"], controls, consts: SceneConstants | None = None
 ) -> tuple[Float[Array, ""], Float[Array, " n_dofs"], Float[Array, "n_dofs n_dofs"]]:
@@ -80,53 +136,21 @@ def energy_derivatives(
 
     coords = scene.coordinates(q)
     n, d = coords.shape
-    dtype = q.dtype
-    *frame_inputs, chords = scene.segment_inputs(plan, consts, dtype)
-
-    # Each segment's local kinematics (:meth:`Scene._segment_local`) and its Jacobian: the
-    # frames by forward derivatives, and the tendon parts (when every chord lies in one segment)
-    # written out from the frames' (:func:`pacjax._model.tendons.tendon_parts_derivatives`): as
-    # automatic derivatives through the chords they were a third of this function's time.
-    f_jac, f_val = jax.vmap(scene.segment_frames_jacobian)(coords, *frame_inputs)
-    chord_d = None
-    if chords is not None:
-        chord_d = jax.vmap(lambda v, j, ch: tendon_parts_derivatives(v[0], v[1], j[0], j[1], ch))(
-            f_val, f_jac, chords
-        )
-    seg_jac = (*f_jac, None if chord_d is None else chord_d.jacobian)
-    seg_val = (*f_val, None if chord_d is None else chord_d.parts)
-    traced_sites = [k for k, _ in plan.points.traced]
-    traced = [
-        jacobian_and_value(lambda y, k=k, s_k=s_k: scene.traced_local_frame(y, k, s_k), coords[k])
-        for k, s_k in plan.points.traced
-    ]
-    traced_val = tuple(v for _, v in traced)
-    traced_jac = tuple(j for j, _ in traced)
-
+    lin = _linearise(scene, coords, plan, consts, q.dtype)
     # Psi reads the knot frames at a few rows only (the segment ends and the world points), so
     # it is differentiated on those rows (the paper's robot with PAC reads 1 row of 10): the
     # buffers written per row fell from 541 to 442 kB, the time by 2-12 % (40 interleaved calls).
     row_plan = plan.on_load_rows()
-    runs = index_runs(plan.load_rows)
-
-    def on_rows(x):
-        return jnp.concatenate([x[:, a:b] for a, b in runs], axis=1)
-
-    seg_val = (on_rows(seg_val[0]), on_rows(seg_val[1]), *seg_val[2:])
-    seg_jac = (on_rows(seg_jac[0]), on_rows(seg_jac[1]), *seg_jac[2:])
-    # Back from those rows to every knot: a constant one-hot product, not a scatter.
-    embed = np.eye(plan.knots.width)[:, plan.load_rows]
+    seg_val, seg_jac = _on_load_rows(plan, lin.values), _on_load_rows(plan, lin.jacobians)
 
     def psi(local):
         return scene.load_energy(local, controls, row_plan, consts)
 
-    local = (seg_val, traced_val)
-    e_load, lam = jax.value_and_grad(psi)(local)
-    lam_seg, lam_traced = lam
+    e_load, (lam_seg, lam_traced) = jax.value_and_grad(psi)((seg_val, lin.traced_values))
 
     # Gradient: J^T lambda, segment by segment.
     grad = jax.vmap(contract)(lam_seg, seg_jac)
-    for k, lt, jt in zip(traced_sites, lam_traced, traced_jac, strict=True):
+    for k, lt, jt in zip(lin.traced_sites, lam_traced, lin.traced_jacobians, strict=True):
         grad = grad.at[k].add(contract(lt, jt))
 
     # J^T d2Psi J: the Hessian of Psi along the linearised kinematics.
@@ -135,14 +159,26 @@ def energy_derivatives(
         seg = jtu.tree_map(lambda v, j: v + jax.vmap(_contract)(j, delta), seg_val, seg_jac)
         tr = tuple(
             jtu.tree_map(lambda v, j, k=k: v + _contract(j, delta[k]), tv, tj)
-            for k, tv, tj in zip(traced_sites, traced_val, traced_jac, strict=True)
+            for k, tv, tj in zip(
+                lin.traced_sites, lin.traced_values, lin.traced_jacobians, strict=True
+            )
         )
         return psi((seg, tr))
 
-    h_load = jax.hessian(psi_linear)(jnp.zeros(n * d, dtype))
+    h_load = jax.hessian(psi_linear)(jnp.zeros(n * d, q.dtype))
+    h_curv = _curvature(scene, coords, plan, lin, lam_seg, lam_traced)
+    hessian = h_el + h_load + h_curv
+    return e_el + e_load, g_el + grad.reshape(n_dofs), hessian
 
-    # lambda . d2L: per segment, along its own coordinates. The tendon parts add their
-    # Hessian along the frames' linearisation and their pull on the frames.
+
+def _curvature(scene: Scene, coords, plan, lin: _Linearised, lam_seg, lam_traced):
+    """``blockdiag_i d2 (lambda_i . L_i)(q_i)``: per segment, along its own coordinates. The
+    tendon parts add their Hessian along the frames' linearisation and their pull on the
+    frames; a traced load site adds its own frame's."""
+    n = coords.shape[0]
+    # Back from Psi's rows to every knot: a constant one-hot product, not a scatter.
+    embed = np.eye(plan.knots.width)[:, plan.load_rows]
+
     def curvature(qi, lam_i, cd, rot, pos, ch, *frame_args):
         lam_rot, lam_pos, lam_moment, lam_parts = lam_i
         # Psi's weights on every knot (zero off its rows).
@@ -159,17 +195,17 @@ def energy_derivatives(
         return scene.segment_frames_curvature(qi, tuple(lam_frames), *frame_args) + h_parts
 
     blocks = jax.vmap(curvature)(
-        coords, lam_seg, chord_d, f_val[0], f_val[1], chords, *frame_inputs
+        coords, lam_seg, lin.chord_derivatives, *lin.frames, lin.chords, *lin.frame_inputs
     )
     for k, s_k, lt in zip(
-        traced_sites, (s for _, s in plan.points.traced), lam_traced, strict=True
+        lin.traced_sites, (s for _, s in plan.points.traced), lam_traced, strict=True
     ):
-        f = lambda y, k=k, s_k=s_k, lt=lt: contract(lt, scene.traced_local_frame(y, k, s_k))  # noqa: E731
-        blocks = blocks.at[k].add(jax.hessian(f)(coords[k]))
-    h_curv = jax.scipy.linalg.block_diag(*[blocks[i] for i in range(n)])
 
-    hessian = h_el + h_load + h_curv
-    return e_el + e_load, g_el + grad.reshape(n_dofs), hessian
+        def traced_energy(y, k=k, s_k=s_k, lt=lt):
+            return contract(lt, scene.traced_local_frame(y, k, s_k))
+
+        blocks = blocks.at[k].add(jax.hessian(traced_energy)(coords[k]))
+    return jax.scipy.linalg.block_diag(*[blocks[i] for i in range(n)])
 
 
 def dead_followers(scene: Scene) -> tuple[Scene, tuple[int, ...]] | None:
