@@ -195,18 +195,18 @@ def main():
     if "track" in parts:
         path = circle((0.0, 0.0, -0.35), 0.04, args.waypoints)
         track = inverse.track(scene, path, rtol=args.track_rtol, atol=1e-8, workspace=workspace)
-        jumps = np.abs(np.diff(np.asarray(track.result.controls), axis=0)).max(axis=1)
+        jumps = np.abs(np.diff(np.asarray(track.waypoints.controls), axis=0)).max(axis=1)
         report["track"] = {
             "waypoints": args.waypoints,
             "path": f"circle of radius 40 mm at z = -0.35 m (first waypoint from {starts})",
             "rtol, atol": [args.track_rtol, 1e-8],
-            "reached": int(np.sum(np.asarray(track.result.reached))),
-            "max_error_m": float(np.max(np.asarray(track.result.error))),
+            "reached": int(np.sum(np.asarray(track.waypoints.reached))),
+            "max_error_m": float(np.max(np.asarray(track.waypoints.error))),
             "seconds (compiled solver)": track.seconds,
             "waypoints_per_second": track.waypoints_per_second,
             "max_command_jump_m": track.max_command_jump,
             "median_command_jump_m": float(np.median(jumps)),
-            "iterations": _stats(np.asarray(track.result.iterations)),
+            "iterations": _stats(np.asarray(track.waypoints.iterations)),
         }
         save()
         summary = {k: v for k, v in report["track"].items() if k != "iterations"}

@@ -52,7 +52,7 @@ def load_aware(n_waypoints, out):
         scene = paper_scene(mass)
         # warm-started waypoints: a loose Levenberg-Marquardt tolerance is enough
         tracked = pj.track(scene, waypoints, rtol=1e-2, atol=1e-8)
-        res = tracked.result
+        res = tracked.waypoints
         runs[mass] = (scene, tracked)
         print(
             f"{1e3 * mass:.0f} g: {int(np.sum(res.reached))}/{n_waypoints} reached, "
@@ -66,10 +66,10 @@ def load_aware(n_waypoints, out):
         "waypoints": waypoints.tolist(),
         "runs": {
             f"{1e3 * m:.0f} g": {
-                "reached": np.asarray(t.result.reached).tolist(),
-                "error_m": np.asarray(t.result.error).tolist(),
-                "controls_m": np.asarray(t.result.controls).tolist(),
-                "tensions_N": np.asarray(t.result.tensions).tolist(),
+                "reached": np.asarray(t.waypoints.reached).tolist(),
+                "error_m": np.asarray(t.waypoints.error).tolist(),
+                "controls_m": np.asarray(t.waypoints.controls).tolist(),
+                "tensions_N": np.asarray(t.waypoints.tensions).tolist(),
                 "max_command_jump_m": t.max_command_jump,
                 "waypoints_per_second": t.waypoints_per_second,
                 "seconds": t.seconds,
@@ -87,7 +87,7 @@ def load_aware(n_waypoints, out):
     shown = np.linspace(0, n_waypoints - 1, 5).astype(int)[:-1]
     for (mass, (scene, tracked)), color in zip(runs.items(), COLORS, strict=True):
         for i in shown:
-            pts, _ = pj.backbone(scene, tracked.result.q[i], 40)
+            pts, _ = pj.backbone(scene, tracked.waypoints.q[i], 40)
             pts = 1e3 * np.asarray(pts)
             ax3.plot(
                 *pts.T,
@@ -107,7 +107,7 @@ def load_aware(n_waypoints, out):
     for k in range(3):  # one panel per section
         ax = fig.add_subplot(grid[k // 2, 2 + k % 2])
         for (_, tracked), color in zip(runs.values(), COLORS, strict=True):
-            u = 1e3 * np.asarray(tracked.result.controls)
+            u = 1e3 * np.asarray(tracked.waypoints.controls)
             for j, style in zip(range(3), ("-", "--", ":"), strict=True):
                 ax.plot(waypoint, u[:, 3 * k + j], style, color=color, lw=1.5)
         ax.set_title(f"section {k + 1}: pull-in of its 3 tendons (-, --, :)")
@@ -118,7 +118,7 @@ def load_aware(n_waypoints, out):
     for (mass, (_, tracked)), color in zip(runs.items(), COLORS, strict=True):
         ax.semilogy(
             waypoint,
-            1e3 * np.maximum(np.asarray(tracked.result.error), 1e-9),
+            1e3 * np.maximum(np.asarray(tracked.waypoints.error), 1e-9),
             color=color,
             label=f"{1e3 * mass:.0f} g",
         )

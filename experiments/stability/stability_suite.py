@@ -232,6 +232,7 @@ def run_worker(model_name, dtype_name, case_names):
     import jax.numpy as jnp
 
     import pacjax as pj
+    from pacjax._results import code_of
 
     # Compile times below are those of a cold cache: the persistent cache stays off.
 
@@ -275,7 +276,7 @@ def run_worker(model_name, dtype_name, case_names):
             "what": what,
             "tol": tol,
             "converged": bool(eq.converged),
-            "result": int(eq.result),
+            "result": int(code_of(eq.result)),
             "reason": eq.reason,
             "residual_norm": float(eq.residual_norm),
             "steps": int(eq.steps),
