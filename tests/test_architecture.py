@@ -204,3 +204,40 @@ def test_the_check_finds_each_kind_of_violation(tmp_path, path, text, expected):
     assert any(expected in v for v in violations(root)), violations(root)
     (root / path).write_text("")
     assert violations(root) == []
+
+
+def test_the_public_names_import_from_pacjax():
+    """SPEC section 3's names, and the result and options objects, from ``import pacjax``."""
+    import pacjax as pj
+
+    names = (
+        "Segment Robot PCC PAC PolynomialCurvature Tendon Gravity PointMass PointForce "
+        "PointMoment Scene presets solve_equilibrium backbone markers solve_batch MocapDataset "
+        "identify inverse_statics simulate Equilibrium Equilibria InverseResult Tracking "
+        "Trajectory IdentificationReport RESULTS SolverOptions"
+    ).split()
+    assert [n for n in names if not hasattr(pj, n)] == []
+    assert callable(pj.presets.stella2023)
+
+
+@pytest.mark.parametrize(
+    "old, new",
+    [
+        ("pacjax.scenefile", "pacjax.io.scenefile"),
+        ("pacjax.mocapfile", "pacjax.io.mocapfile"),
+        ("pacjax.fitplots", "pacjax.plots.fit"),
+        ("pacjax.animation", "pacjax.plots.animation"),
+        ("pacjax.batchrun", "pacjax.cli.batchrun"),
+        ("pacjax.bench", "pacjax.cli.bench"),
+    ],
+)
+def test_moved_modules_import_from_their_old_paths_with_a_warning(old, new):
+    import importlib
+    import sys
+
+    import pacjax  # noqa: F401  (installs the finder of old paths)
+
+    sys.modules.pop(old, None)
+    with pytest.warns(DeprecationWarning, match=f"{old} is deprecated.*import {new}"):
+        module = importlib.import_module(old)
+    assert module is importlib.import_module(new)
