@@ -18,7 +18,7 @@ Written as an ``optimistix.AbstractRootFinder`` so that ``optimistix.root_find``
 provides the implicit-function-theorem adjoint: the Hessian graph is traced once.
 """
 
-from typing import Any
+from typing import Any, NamedTuple
 
 import equinox as eqx
 import jax
@@ -92,8 +92,53 @@ def stiffness_modes(jac, weights, size, tol):
     return eigvals, eigvecs, dy
 
 
+class _Point(NamedTuple):
+    """The iterate reached by the search and the problem linearised there."""
+
+    y: Float[Array, " n"]
+    residual: Float[Array, " n"]
+    merit: Float[Array, ""]
+    jacobian: Float[Array, "n n"]
+    weights: Float[Array, " n"]
+    drive: Float[Array, " n"]
+
+
+def _saddle_free_step(state: PTCState) -> Float[Array, " n"]:
+    """The continuation step of a conservative scene, from the stiffness modes of ``state``.
+
+    ``K`` is the scaled Hessian. Continuation step with ``|lambda|`` ("saddle-free" Newton): full
+    Newton along stable modes, descent along the others; ``1 / dt`` shifts every mode.
+    """
+    w = state.weights
+    rz = jnp.matmul(state.eigvecs.T, w * state.residual, precision=MATMUL_PRECISION)
+    gain = 1.0 / (jnp.abs(state.eigvals) + 1.0 / state.dt)
+    return -(jnp.matmul(state.eigvecs, gain * rz, precision=MATMUL_PRECISION)) / w
+
+
+def _shorter(alpha, merit, merit0, slope):
+    """The next, shorter trial length after ``alpha``, whose merit ``merit`` did not descend.
+
+    The minimiser of the quadratic through the merit and its slope at 0 and the merit at alpha,
+    within [alpha / 10, alpha / 2] (Nocedal and Wright, section 3.5); half the step where that
+    quadratic has no minimum (or the slope is unknown, ``nan``).
+    """
+    # Under vmap the search runs as long as its slowest row, and the rows that overshoot do so
+    # by 8-16x (the paper's robot, third step, where dt has grown to 20 against a soft mode):
+    # halving took them 3-4 trials, the quadratic mostly 1.
+    curv = merit - merit0 - slope * alpha
+    fit = (curv > 0) & (slope < 0)
+    guess = -slope * alpha**2 / (2.0 * jnp.where(fit, curv, 1.0))
+    guess = jnp.where(fit & jnp.isfinite(guess), guess, 0.5 * alpha)
+    return jnp.clip(guess, 0.1 * alpha, 0.5 * alpha)
+
+
 class PseudoTransientContinuation(optx.AbstractRootFinder):
-    """Root finder for ``fn(y, args) -> (r, (merit, weights))``; see the module docstring."""
+    """Root finder for ``fn(y, args) -> (r, (merit, weights))``; see the module docstring.
+
+    One :meth:`step` is a descent direction from the linearisation at ``y`` (:meth:`_descent`),
+    a search along it on the merit (:meth:`_search`), the linearisation at the point reached
+    (:meth:`_linearise`) and the control of the pseudo-time step (:meth:`_control`).
+    """
 
     rtol: float
     atol: float
@@ -114,6 +159,11 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
     # ``E(y') - Q(y) . (y' - y)``, the energy with the non-conservative forces frozen at ``y``
     # (its gradient at ``y`` is ``r``). When False the merit is ``|r|^2 / 2``.
     frozen_work: bool = False
+
+    @property
+    def _frozen(self) -> bool:
+        """Whether the merit is the frozen work (non-conservative, with ``frozen_work``)."""
+        return self.frozen_work and not self.symmetric
 
     def init(self, fn, y, args, options, f_struct, aux_struct, tags):
         del fn, args, options, aux_struct, tags
@@ -147,100 +197,108 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
         )
 
     def step(self, fn, y, args, options, state: PTCState, tags):
+        """One iteration from ``y``: a direction, a search along it, the new linearisation.
+
+        The first step (``state.step == 0``) only linearises at ``y`` itself; a converged saddle
+        is left by the escape step. Returns the next iterate (``y`` where the step is rejected),
+        the state there and ``(merit, weights)`` at it.
+        """
         del options, tags
-        dtype = y.dtype
-        eye = jnp.eye(y.shape[0], dtype=dtype)
-        eps = jnp.finfo(dtype).eps
         first = state.step == 0
         escape = self._wants_escape(state) & ~first
+        delta, took_newton = self._descent(fn, y, args, state, first, escape)
+        alpha, ok = self._search(fn, y, args, state, delta, took_newton, first, escape)
+        # No acceptable step even at the smallest length: take the shortest flow step when dt
+        # is already tiny (it is a descent direction), else shrink dt and stay.
+        tiny_dt = state.dt <= _MIN_DT
+        accept = ok | tiny_dt
+        alpha = jnp.where(ok, alpha, _MIN_ALPHA)
+        new = self._linearise(fn, _moved(args, y, alpha * delta), args, state)
+        finite = (
+            jnp.all(jnp.isfinite(new.residual))
+            & jnp.isfinite(new.merit)
+            & jnp.all(jnp.isfinite(new.jacobian))
+        )
+        accept = first | (accept & finite)
+        new_state = self._control(state, new, alpha, ok, tiny_dt, accept, finite, first, escape)
+        return jnp.where(accept, new.y, y), new_state, (new_state.merit, new_state.weights)
+
+    def _descent(self, fn, y, args, state: PTCState, first, escape):
+        """The step ``delta`` from ``y`` that the search shortens, and ``took_newton``.
+
+        ``delta`` is zero on the first step, ``state.escape_dy`` on an escape, else the
+        continuation step from the linearisation in ``state`` (:func:`_saddle_free_step` for a
+        conservative scene, :meth:`_shifted_flow_step` for the others). ``took_newton`` (``None``
+        for a conservative scene) says that it is a plain Newton step that halved the residual.
+        """
         # Where the stiffness is indefinite (a saddle or a maximum nearby) the step must still
         # go downhill and must not be drawn to the saddle.
         if self.symmetric:
-            # Conservative scene: K is the scaled Hessian. Continuation step with |lambda|
-            # ("saddle-free" Newton): full Newton along stable modes, descent along the others.
-            w = state.weights
-            rz = jnp.matmul(state.eigvecs.T, w * state.residual, precision=MATMUL_PRECISION)
-            gain = 1.0 / (jnp.abs(state.eigvals) + 1.0 / state.dt)
-            newton = -(jnp.matmul(state.eigvecs, gain * rz, precision=MATMUL_PRECISION)) / w
+            newton, took_newton = _saddle_free_step(state), None
         else:
-            # Non-conservative loads (follower forces, dead moments in 3D): J is not symmetric.
-            # Far from a solution, shift it by enough to dominate the negative curvature of its
-            # symmetric part (a short stretch of the flow). That shift caps dt, so near a
-            # solution whose symmetric part is indefinite (a dead moment bending a twistable rod
-            # past ~2 rad) the capped steps creep; there (scaled residual below
-            # ``_NEWTON_NEAR``, forces 1 % of the elastic scale) the plain Newton step is tried
-            # first and taken when it halves the residual (one more residual evaluation per
-            # such step). Far away it is not: from a straight PCC/PAC segment it jumps to the
-            # spurious polar equilibrium (phi along the moment, no bending).
-            #
-            # Both systems go to LAPACK as one batched factorisation. Two independent solves
-            # are two custom calls that XLA:CPU may run at once, and jaxlib 0.10's batched
-            # LAPACK kernels then each wait on sub-tasks queued to the same intra-op thread
-            # pool: with as many such calls as pool threads (2 on a 2-core machine), every
-            # thread waits and the program hangs (seen in gdb: both in LuDecompositionKernel ->
-            # ParallelBatchMap -> BlockingCounter::Wait). pacjax._statics.linalg keeps every call
-            # below the size that takes that path; one call is also cheaper than two.
-            dt_safe = jnp.where(state.eig < 0, jnp.minimum(state.dt, 0.5 / -state.eig), state.dt)
-            matrices = jnp.stack([state.jacobian + eye / dt_safe, state.jacobian])
-            rhs = jnp.broadcast_to(-state.residual[:, None], (2, y.shape[0], 1))
-            flow, full = _linalg.solve(matrices, rhs)[..., 0]
-
-            near = max_abs(state.residual) <= _NEWTON_NEAR
-            if not self.frozen_work:
-                near = near & (state.eig < 0)
-            # (Under vmap a cond runs both branches: the trial is evaluated for every row.)
-            r_newton, _ = fn(_moved(args, y, full), args)
-            took_newton = near & jnp.all(jnp.isfinite(full)) & jnp.all(jnp.isfinite(r_newton))
-            took_newton = took_newton & (max_abs(r_newton) <= 0.5 * max_abs(state.residual))
-            took_newton = took_newton & ~first & ~escape
-            newton = jnp.where(took_newton, full, flow)
+            newton, took_newton = self._shifted_flow_step(fn, y, args, state, first, escape)
         delta = jnp.where(first, 0.0, jnp.where(escape, state.escape_dy, newton))
+        return delta, took_newton
+
+    def _shifted_flow_step(self, fn, y, args, state: PTCState, first, escape):
+        """The continuation step of a non-conservative scene and whether it is a Newton step.
+
+        Solves ``(J + I / dt) dy = -r`` (``dt`` capped by the negative curvature) and ``J dy = -r``
+        in one call, and takes the Newton step where it halves the residual near a solution
+        (one more residual evaluation). Returns ``(step, took_newton)``.
+        """
+        # Non-conservative loads (follower forces, dead moments in 3D): J is not symmetric.
+        # Far from a solution, shift it by enough to dominate the negative curvature of its
+        # symmetric part (a short stretch of the flow). That shift caps dt, so near a
+        # solution whose symmetric part is indefinite (a dead moment bending a twistable rod
+        # past ~2 rad) the capped steps creep; there (scaled residual below
+        # ``_NEWTON_NEAR``, forces 1 % of the elastic scale) the plain Newton step is tried
+        # first and taken when it halves the residual (one more residual evaluation per
+        # such step). Far away it is not: from a straight PCC/PAC segment it jumps to the
+        # spurious polar equilibrium (phi along the moment, no bending).
+        #
+        # Both systems go to LAPACK as one batched factorisation. Two independent solves
+        # are two custom calls that XLA:CPU may run at once, and jaxlib 0.10's batched
+        # LAPACK kernels then each wait on sub-tasks queued to the same intra-op thread
+        # pool: with as many such calls as pool threads (2 on a 2-core machine), every
+        # thread waits and the program hangs (seen in gdb: both in LuDecompositionKernel ->
+        # ParallelBatchMap -> BlockingCounter::Wait). pacjax._statics.linalg keeps every call
+        # below the size that takes that path; one call is also cheaper than two.
+        eye = jnp.eye(y.shape[0], dtype=y.dtype)
+        dt_safe = jnp.where(state.eig < 0, jnp.minimum(state.dt, 0.5 / -state.eig), state.dt)
+        matrices = jnp.stack([state.jacobian + eye / dt_safe, state.jacobian])
+        rhs = jnp.broadcast_to(-state.residual[:, None], (2, y.shape[0], 1))
+        flow, full = _linalg.solve(matrices, rhs)[..., 0]
+
+        near = max_abs(state.residual) <= _NEWTON_NEAR
+        if not self.frozen_work:
+            near = near & (state.eig < 0)
+        # (Under vmap a cond runs both branches: the trial is evaluated for every row.)
+        r_newton, _ = fn(_moved(args, y, full), args)
+        took_newton = near & jnp.all(jnp.isfinite(full)) & jnp.all(jnp.isfinite(r_newton))
+        took_newton = took_newton & (max_abs(r_newton) <= 0.5 * max_abs(state.residual))
+        took_newton = took_newton & ~first & ~escape
+        return jnp.where(took_newton, full, flow), took_newton
+
+    def _search(self, fn, y, args, state: PTCState, delta, took_newton, first, escape):
+        """The length ``alpha`` of the step along ``delta``, and ``ok``: whether it is acceptable.
+
+        Trials ``alpha = 1`` and then ever shorter (:func:`_shorter`) until the merit
+        (:meth:`_merit_only`) does not rise above ``state.merit`` beyond its rounding, down to
+        ``_MIN_ALPHA``. The full step is acceptable unchecked on the first step and an escape,
+        and when its predicted decrease is within rounding (:meth:`_slope`) or, for a
+        non-conservative scene, when it is a Newton step that halved the residual.
+        """
+        eps = jnp.finfo(y.dtype).eps
 
         def descends(merit):
             slack = 64 * eps * (jnp.abs(state.merit) + jnp.abs(merit))
             return jnp.isfinite(merit) & (merit <= state.merit + slack)
 
         # Backtracking on the continuation step, no Jacobian: every trial length is checked on
-        # the merit alone, which for a conservative scene is the energy without its gradient
-        # (about half the cost of the residual; the residual comes with the Jacobian at the
-        # accepted point). Near a solution the merit's change is below its rounding, and a
-        # rise there says nothing: a full step whose predicted decrease (the merit's slope
-        # along it; its gradient in y is w^2 r, with w = sqrt(d) sigma) is within the rounding
-        # of the merit's terms (bounded by the elastic energy w^2 y^2 beside the merit) is taken.
-        frozen = self.frozen_work and not self.symmetric
-        if self.structured and self.symmetric:
-            merit_only = args.energy
-        elif frozen:
-
-            def merit_only(y_):
-                return args.energy(y_) - jnp.dot(state.drive, y_ - y, precision=MATMUL_PRECISION)
-        else:
-
-            def merit_only(y_):
-                return fn(y_, args)[1][0]
-
-        if self.symmetric or self.frozen_work:
-            slope = jnp.dot(state.weights**2 * state.residual, delta, precision=MATMUL_PRECISION)
-            scale = jnp.abs(state.merit) + jnp.sum((state.weights * y) ** 2)
-            rounding = (slope <= 0) & (-slope <= 64 * eps * scale)
-        else:
-            # The merit |r|^2 / 2 is a sum of squares: its rounding is relative to itself.
-            # Its slope along the step is not needed: the search halves the step.
-            slope = jnp.asarray(jnp.nan, dtype)
-            rounding = False
-
-        def shorter(alpha, merit):
-            # The minimiser of the quadratic through the merit and its slope at 0 and the merit
-            # at alpha, within [alpha / 10, alpha / 2] (Nocedal and Wright, section 3.5); half
-            # the step where that quadratic has no minimum. Under vmap the search runs as long
-            # as its slowest row, and the rows that overshoot do so by 8-16x (the paper's
-            # robot, third step, where dt has grown to 20 against a soft mode): halving took
-            # them 3-4 trials, the quadratic mostly 1.
-            curv = merit - state.merit - slope * alpha
-            fit = (curv > 0) & (slope < 0)
-            guess = -slope * alpha**2 / (2.0 * jnp.where(fit, curv, 1.0))
-            guess = jnp.where(fit & jnp.isfinite(guess), guess, 0.5 * alpha)
-            return jnp.clip(guess, 0.1 * alpha, 0.5 * alpha)
+        # the merit alone (the residual comes with the Jacobian at the accepted point).
+        merit_only = self._merit_only(fn, y, args, state)
+        slope, rounding = self._slope(y, state, delta, eps)
 
         def search_cond(carry):
             alpha, _, ok = carry
@@ -248,7 +306,7 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
 
         def search_body(carry):
             alpha, merit, _ = carry
-            alpha = shorter(alpha, merit)
+            alpha = _shorter(alpha, merit, state.merit, slope)
             merit = merit_only(_moved(args, y, alpha * delta))
             return alpha, merit, descends(merit) | first | escape
 
@@ -260,40 +318,84 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
             # follower loads, and the merit of the Newton step can rise.
             ok_full = ok_full | took_newton
         alpha, _, ok = jax.lax.while_loop(
-            search_cond, search_body, (jnp.asarray(1.0, dtype), m_full, ok_full)
+            search_cond, search_body, (jnp.asarray(1.0, y.dtype), m_full, ok_full)
         )
-        # No acceptable step even at the smallest length: take the shortest flow step when dt
-        # is already tiny (it is a descent direction), else shrink dt and stay.
-        tiny_dt = state.dt <= _MIN_DT
-        accept = ok | tiny_dt
-        alpha = jnp.where(ok, alpha, _MIN_ALPHA)
-        y_new = _moved(args, y, alpha * delta)
+        return alpha, ok
+
+    def _merit_only(self, fn, y, args, state: PTCState):
+        """The merit as a function of the trial point, for the search from ``y``.
+
+        For a conservative scene that is the energy without its gradient (about half the cost
+        of the residual) where the problem gives it alone; for a non-conservative one with
+        ``frozen_work`` the energy less the work of the forces frozen at ``y``; else ``fn``'s.
+        """
+        if self.structured and self.symmetric:
+            return args.energy
+        if self._frozen:
+
+            def frozen_work(y_):
+                return args.energy(y_) - jnp.dot(state.drive, y_ - y, precision=MATMUL_PRECISION)
+
+            return frozen_work
+
+        def merit(y_):
+            return fn(y_, args)[1][0]
+
+        return merit
+
+    def _slope(self, y, state: PTCState, delta, eps):
+        """The merit's slope along ``delta`` at ``y``, and ``rounding``: the full step is taken.
+
+        Near a solution the merit's change is below its rounding, and a rise there says
+        nothing: a full step whose predicted decrease (the merit's slope along it; its gradient
+        in y is w^2 r, with w = sqrt(d) sigma) is within the rounding of the merit's terms
+        (bounded by the elastic energy w^2 y^2 beside the merit) is taken.
+        """
+        if self.symmetric or self.frozen_work:
+            slope = jnp.dot(state.weights**2 * state.residual, delta, precision=MATMUL_PRECISION)
+            scale = jnp.abs(state.merit) + jnp.sum((state.weights * y) ** 2)
+            rounding = (slope <= 0) & (-slope <= 64 * eps * scale)
+        else:
+            # The merit |r|^2 / 2 is a sum of squares: its rounding is relative to itself.
+            # Its slope along the step is not needed: the search halves the step.
+            slope = jnp.asarray(jnp.nan, y.dtype)
+            rounding = False
+        return slope, rounding
+
+    def _linearise(self, fn, y, args, state: PTCState) -> _Point:
+        """The residual, merit, weights and Jacobian at ``y`` in one evaluation, and the drive.
+
+        ``args.linearise`` for a structured problem, else forward mode through ``fn``. The
+        drive (the non-conservative force frozen for the next search) is ``state.drive`` where
+        the merit does not use it.
+        """
 
         def with_aux(y_):
             r, aux = fn(y_, args)
             return r, (r, aux)
 
         if self.structured:
-            jac, (r_new, (m_new, weights)) = args.linearise(y_new)
+            jac, (r, (merit, weights)) = args.linearise(y)
         else:
-            jac, (r_new, (m_new, weights)) = jax.jacfwd(with_aux, has_aux=True)(y_new)
-        drive = args.drive(y_new) if frozen else state.drive
-        finite = jnp.all(jnp.isfinite(r_new)) & jnp.isfinite(m_new) & jnp.all(jnp.isfinite(jac))
-        accept = first | (accept & finite)
-        ratio = max_abs(state.residual) / jnp.maximum(max_abs(r_new), jnp.finfo(dtype).tiny)
-        grown = jnp.minimum(state.dt * jnp.clip(ratio, *_DT_GROWTH), self.max_dt)
-        dt = jnp.where(
-            escape | first,
-            self.initial_dt,
-            jnp.where(accept & (alpha == 1.0), grown, jnp.where(accept, state.dt, 0.1 * state.dt)),
-        ).astype(dtype)
+            jac, (r, (merit, weights)) = jax.jacfwd(with_aux, has_aux=True)(y)
+        drive = args.drive(y) if self._frozen else state.drive
+        return _Point(y, r, merit, jac, weights, drive)
+
+    def _control(self, state, new: _Point, alpha, ok, tiny_dt, accept, finite, first, escape):
+        """The state after the step: the point ``new`` where ``accept``, else that of ``state``.
+
+        Also the next pseudo-time step (:meth:`_next_dt`), the stiffness modes and escape step
+        for the next direction (:func:`stiffness_modes`), the escape bookkeeping and the result
+        code (``NONFINITE`` at a non-finite start, ``STALLED``).
+        """
 
         def keep(a, b):
             return jnp.where(accept, a, b)
 
-        jac = keep(jac, state.jacobian)
+        dt = self._next_dt(state, new.residual, alpha, accept, first, escape)
+        jac = keep(new.jacobian, state.jacobian)
         eigvals, eigvecs, escape_dy = stiffness_modes(
-            jac, weights, self.escape_size, self.stability_tol
+            jac, new.weights, self.escape_size, self.stability_tol
         )
         eig = eigvals[0]
         code = jnp.where(first & ~finite, NONFINITE, state.code)
@@ -306,11 +408,11 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
         # rows of its batch idle beside it).
         stalled = tiny_dt & (~ok | ~accept)
         code = jnp.where(stalled & (code == SUCCESSFUL), STALLED, code)
-        new_state = PTCState(
-            residual=keep(r_new, state.residual),
-            merit=keep(m_new, state.merit),
+        return PTCState(
+            residual=keep(new.residual, state.residual),
+            merit=keep(new.merit, state.merit),
             jacobian=jac,
-            weights=weights,
+            weights=new.weights,
             dt=dt,
             step=state.step + 1,
             escapes=state.escapes + escape.astype(state.escapes.dtype),
@@ -323,10 +425,26 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
             eigvals=eigvals,
             eigvecs=eigvecs,
             escape_dy=escape_dy,
-            drive=keep(drive, state.drive),
+            drive=keep(new.drive, state.drive),
             code=code,
         )
-        return keep(y_new, y), new_state, (keep(m_new, state.merit), weights)
+
+    def _next_dt(self, state: PTCState, r_new, alpha, accept, first, escape):
+        """The pseudo-time step for the next iteration (switched evolution relaxation).
+
+        After an accepted full step ``dt`` grows by the fall of the residual (within
+        ``_DT_GROWTH``, up to ``max_dt``); after an accepted shortened step it stays; after a
+        rejected one it shrinks tenfold; on the first step and an escape it restarts at
+        ``initial_dt``.
+        """
+        dtype = state.dt.dtype
+        ratio = max_abs(state.residual) / jnp.maximum(max_abs(r_new), jnp.finfo(dtype).tiny)
+        grown = jnp.minimum(state.dt * jnp.clip(ratio, *_DT_GROWTH), self.max_dt)
+        return jnp.where(
+            escape | first,
+            self.initial_dt,
+            jnp.where(accept & (alpha == 1.0), grown, jnp.where(accept, state.dt, 0.1 * state.dt)),
+        ).astype(dtype)
 
     def terminate(self, fn, y, args, options, state: PTCState, tags):
         del fn, y, args, options, tags
