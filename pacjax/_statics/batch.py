@@ -100,16 +100,8 @@ def iter_batch(
     if n == 0:
         raise ValueError("controls_batch is empty")
     q0 = check_q(scene, q0, dtype, rows=n)
-    if params is not None:
-        if update is None:
-            raise ValueError("params= needs update=(scene, row_of_params) -> scene")
-        params = jtu.tree_map(np.asarray, params)
-        lengths = {x.shape[0] for x in jtu.tree_leaves(params)}
-        if lengths != {n}:
-            raise ValueError(f"every leaf of params needs a leading axis of {n}, got {lengths}")
-    n_devices = len(jax.local_devices()) if devices is None else devices
-    if not 1 <= n_devices <= len(jax.local_devices()):
-        raise ValueError(f"devices must be in 1..{len(jax.local_devices())}, got {devices}")
+    params = _check_params(params, update, n)
+    n_devices = _check_devices(devices)
     chunk = max(1, min(chunk_size, n))
     sharding = _sharding(n_devices)
     lanes = pool_lanes(chunk, sharding, warm_start)
@@ -119,6 +111,41 @@ def iter_batch(
     pool = pool_solve(
         scene, controls_batch, starts, params, update, opts, slots, chunk, dtype, sharding, lanes
     )
+    retry = (fallback or not scene.is_conservative) and opts.method == "ptc"
+    for part in _chunks_in_order(pool, starts, controls_batch, chunk):
+        eq = jtu.tree_map(jnp.asarray, part.eq)
+        if retry and not np.all(part.eq.converged):
+            u = controls_batch[part.rows]
+            p = None if params is None else jtu.tree_map(lambda x, r=part.rows: x[r], params)
+            eq = _retry_failed(scene, u, part.q_start, p, update, opts, eq, dtype, fallback)
+        yield part.rows, eq
+
+
+def _check_params(params, update, n: int):
+    """Per-row parameters as numpy, each leaf with a leading axis of ``n`` rows."""
+    if params is None:
+        return None
+    if update is None:
+        raise ValueError("params= needs update=(scene, row_of_params) -> scene")
+    params = jtu.tree_map(np.asarray, params)
+    lengths = {x.shape[0] for x in jtu.tree_leaves(params)}
+    if lengths != {n}:
+        raise ValueError(f"every leaf of params needs a leading axis of {n}, got {lengths}")
+    return params
+
+
+def _check_devices(devices: int | None) -> int:
+    """How many local devices to shard over (default all)."""
+    n_devices = len(jax.local_devices()) if devices is None else devices
+    if not 1 <= n_devices <= len(jax.local_devices()):
+        raise ValueError(f"devices must be in 1..{len(jax.local_devices())}, got {devices}")
+    return n_devices
+
+
+def _chunks_in_order(pool, starts, controls_batch, chunk: int) -> Iterator["_ChunkBuffer"]:
+    """The output chunks, in order, each as soon as all its rows have come out of the pool
+    (which finishes rows in any order); warm starts learn from every finished row."""
+    n = controls_batch.shape[0]
     buffers: dict[int, _ChunkBuffer] = {}
     next_chunk = 0
     for rows, q_start, eq_rows in pool:
@@ -130,15 +157,8 @@ def iter_batch(
             mine = rows // chunk == c
             buffers[c].put(rows[mine], q_start[mine], eq_rows, mine)
         while next_chunk in buffers and buffers[next_chunk].full:
-            part = buffers.pop(next_chunk)
+            yield buffers.pop(next_chunk)
             next_chunk += 1
-            eq = jtu.tree_map(jnp.asarray, part.eq)
-            retry = fallback or not scene.is_conservative
-            if retry and opts.method == "ptc" and not np.all(part.eq.converged):
-                u = controls_batch[part.rows]
-                p = None if params is None else jtu.tree_map(lambda x, r=part.rows: x[r], params)
-                eq = _retry_failed(scene, u, part.q_start, p, update, opts, eq, dtype, fallback)
-            yield part.rows, eq
 
 
 class _Starts:
