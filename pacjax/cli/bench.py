@@ -24,6 +24,7 @@ from __future__ import annotations
 import os
 import platform
 import time
+from typing import NamedTuple
 
 import diffrax
 import equinox as eqx
@@ -234,6 +235,18 @@ def bench_gradient(scene: pj.Scene, commands: np.ndarray, tol: float, repeats: i
 
 
 # ------------------------------------------------------------------------------ the whole run
+class _Subjects(NamedTuple):
+    """What a run measures: scene makers per model (dtype name -> scene), the float64 scenes of
+    the baseline, the commands (rows enough for every stage) and how the record names them."""
+
+    scenes: dict
+    base_scenes: dict
+    commands: np.ndarray
+    models: tuple
+    description: str
+    command_text: str
+
+
 def run(
     batches=(1, 100),
     models=("PAC",),
@@ -256,8 +269,38 @@ def run(
     alone, labelled ``scene_label`` (``models`` and ``baseline_models`` are then ignored and the
     baseline runs on it), under uniform commands in its :func:`pacjax.cli.batchrun.default_ranges`.
     """
-    from .batchrun import default_ranges
+    batches = _check_sizes(batches, dtypes, baseline_batch, grad_batch)
+    n_rows = max(batches + [baseline_batch, grad_batch])
+    if scene is None:
+        subjects = _paper_subjects(models, baseline_models, baseline_batch, n_rows, seed)
+    else:
+        subjects = _scene_subjects(scene, scene_label, baseline_batch, n_rows, seed)
+    record = _new_record(subjects, batches, dtypes, baseline_batch, grad_batch)
 
+    def checkpoint():
+        # The ratios first, so that every saved record is complete as far as it goes.
+        _ratios(record)
+        if save is not None:
+            save(record)
+
+    commands = subjects.commands
+    for model, make in subjects.scenes.items():
+        tips = _measure_model(record, model, make, dtypes, batches, commands, log, checkpoint)
+        if "float64" in tips and "float32" in tips:
+            record["float32_vs_float64"][model] = _compare_dtypes(make, tips, max(batches))
+            checkpoint()
+    for model, sc in subjects.base_scenes.items():
+        _measure_baseline(record, model, sc, commands[:baseline_batch], log, checkpoint)
+    if grad_batch:
+        for model, make in subjects.scenes.items():
+            scene64 = make("float64")
+            _measure_gradient(record, model, scene64, commands[:grad_batch], log, checkpoint)
+    return record
+
+
+def _check_sizes(batches, dtypes, baseline_batch: int, grad_batch: int) -> list[int]:
+    """The batch sizes as ints, after checking them, the dtypes and the stage sizes (before
+    anything is built or compiled)."""
     batches = [int(b) for b in batches]
     if not batches or min(batches) < 1:
         raise ValueError(f"batch sizes must be >= 1, got {batches}")
@@ -268,41 +311,58 @@ def run(
         raise ValueError("dtypes is empty")
     if baseline_batch < 0 or grad_batch < 0:
         raise ValueError("baseline_batch and grad_batch must be >= 0 (0: skip)")
-    n_rows = max(batches + [baseline_batch, grad_batch])
-    if scene is None:
-        if not models:
-            raise ValueError("models is empty")
-        for m in (*models, *baseline_models):
-            if m not in MODELS:
-                raise ValueError(f"model must be one of {', '.join(MODELS)}; got {m!r}")
-        scenes = {m: (lambda d, m=m: paper_scene(m, d)) for m in models}
-        base_scenes = {m: paper_scene(m) for m in baseline_models} if baseline_batch else {}
-        commands = random_commands(n_rows, seed=seed)
-        description = f"pj.presets.stella2023(model, tip_mass={TIP_MASS})"
-        command_text = f"uniform pull-ins in [0, {MAX_PULL_IN}] m, seed {seed}"
-    else:
-        label = scene_label or type(scene.model).__name__
-        low, high = default_ranges(scene)
-        commands = np.random.default_rng(seed).uniform(low, high, (n_rows, scene.n_tendons))
+    return batches
 
-        def cast(d, s=scene):
-            return s if d == "float64" else pj.astype(s, DTYPES[d])
 
-        scenes = {label: cast}
-        base_scenes = {label: scene} if baseline_batch else {}
-        models = (label,)
-        description = label
-        command_text = f"uniform in pacjax.cli.batchrun.default_ranges, seed {seed}"
-    record = {
+def _paper_subjects(models, baseline_models, baseline_batch: int, n_rows: int, seed: int):
+    """The paper's robot with each model, under :func:`random_commands`."""
+    if not models:
+        raise ValueError("models is empty")
+    for m in (*models, *baseline_models):
+        if m not in MODELS:
+            raise ValueError(f"model must be one of {', '.join(MODELS)}; got {m!r}")
+    return _Subjects(
+        scenes={m: (lambda d, m=m: paper_scene(m, d)) for m in models},
+        base_scenes={m: paper_scene(m) for m in baseline_models} if baseline_batch else {},
+        commands=random_commands(n_rows, seed=seed),
+        models=models,
+        description=f"pj.presets.stella2023(model, tip_mass={TIP_MASS})",
+        command_text=f"uniform pull-ins in [0, {MAX_PULL_IN}] m, seed {seed}",
+    )
+
+
+def _scene_subjects(scene: pj.Scene, label, baseline_batch: int, n_rows: int, seed: int):
+    """One given (float64) scene, under uniform commands in its default ranges."""
+    from .batchrun import default_ranges
+
+    label = label or type(scene.model).__name__
+    low, high = default_ranges(scene)
+
+    def cast(d, s=scene):
+        return s if d == "float64" else pj.astype(s, DTYPES[d])
+
+    return _Subjects(
+        scenes={label: cast},
+        base_scenes={label: scene} if baseline_batch else {},
+        commands=np.random.default_rng(seed).uniform(low, high, (n_rows, scene.n_tendons)),
+        models=(label,),
+        description=label,
+        command_text=f"uniform in pacjax.cli.batchrun.default_ranges, seed {seed}",
+    )
+
+
+def _new_record(subjects: _Subjects, batches, dtypes, baseline_batch: int, grad_batch: int):
+    """The record before any measurement: the machine, the configuration, empty results."""
+    return {
         "machine": machine_info(),
         "config": {
-            "scene": description,
-            "commands": command_text,
+            "scene": subjects.description,
+            "commands": subjects.command_text,
             "batches": batches,
-            "models": list(models),
+            "models": list(subjects.models),
             "dtypes": list(dtypes),
             "tolerances": {d: TOLERANCES[d] for d in dtypes},
-            "baseline_models": list(base_scenes),
+            "baseline_models": list(subjects.base_scenes),
             "baseline_batch": baseline_batch,
             "grad_batch": grad_batch,
             "note": "compile_s = first call - warm call (a load from the persistent compilation "
@@ -314,61 +374,67 @@ def run(
         "float32_vs_float64": {},
     }
 
-    def checkpoint():
-        _ratios(record)
-        if save is not None:
-            save(record)
 
-    for model, make in scenes.items():
-        tips = {}
-        for dtype in dtypes:
-            sc = make(dtype)
-            for batch in batches:
-                log(f"{model} {dtype} batch {batch} ...")
-                row, eq = bench_batch(sc, commands[:batch], TOLERANCES[dtype])
-                row.update(model=model, dtype=dtype)
-                record["results"].append(row)
-                log(
-                    f"  {row['equilibria_per_s']:.1f} eq/s, compile {row['compile_s']:.1f} s, "
-                    f"converged {row['converged']:.1%}"
-                )
-                checkpoint()
-                if batch == max(batches):
-                    tips[dtype] = (np.asarray(eq.q, np.float64), np.asarray(eq.converged))
-        if "float64" in tips and "float32" in tips:
-            scene64 = make("float64")
-            q64, ok64 = tips["float64"]
-            q32, ok32 = tips["float32"]
-            both = ok64 & ok32
-            diff = np.linalg.norm(
-                np.asarray(_tips(scene64, jnp.asarray(q64)))
-                - np.asarray(_tips(scene64, jnp.asarray(q32))),
-                axis=1,
+def _measure_model(record, model, make, dtypes, batches, commands, log, checkpoint) -> dict:
+    """One model's batch-solver rows (every dtype x batch size) into ``record["results"]``;
+    returns ``{dtype: (q as float64, converged)}`` of the largest batch, for the dtype
+    comparison."""
+    tips = {}
+    for dtype in dtypes:
+        sc = make(dtype)
+        for batch in batches:
+            log(f"{model} {dtype} batch {batch} ...")
+            row, eq = bench_batch(sc, commands[:batch], TOLERANCES[dtype])
+            row.update(model=model, dtype=dtype)
+            record["results"].append(row)
+            log(
+                f"  {row['equilibria_per_s']:.1f} eq/s, compile {row['compile_s']:.1f} s, "
+                f"converged {row['converged']:.1%}"
             )
-            record["float32_vs_float64"][model] = {
-                "batch": max(batches),
-                "rows_both_converged": int(both.sum()),
-                "max_tip_difference_m": float(diff[both].max()) if both.any() else None,
-                "median_tip_difference_m": float(np.median(diff[both])) if both.any() else None,
-            }
             checkpoint()
-    for model, sc in base_scenes.items():
-        log(f"{model} float64 plain-flow baseline, batch {baseline_batch} ...")
-        base, _ = bench_flow_baseline(sc, commands[:baseline_batch], TOLERANCES["float64"])
-        record["baselines"][model] = base
-        checkpoint()
-        log(
-            f"  {base['equilibria_per_s']:.2f} eq/s, compile {base['compile_s']:.1f} s, "
-            f"converged {base['converged']:.1%}"
-        )
-    if grad_batch:
-        for model, make in scenes.items():
-            log(f"{model} float64 gradient through a batch of {grad_batch} ...")
-            g = bench_gradient(make("float64"), commands[:grad_batch], TOLERANCES["float64"])
-            record["gradients"][model] = g
-            checkpoint()
-            log(f"  gradient / forward = {g['gradient_over_forward']:.2f}")
-    return record
+            if batch == max(batches):
+                tips[dtype] = (np.asarray(eq.q, np.float64), np.asarray(eq.converged))
+    return tips
+
+
+def _compare_dtypes(make, tips: dict, batch: int) -> dict:
+    """Tip-position differences between the float32 and float64 solutions (both evaluated on the
+    float64 scene, so only the solves differ) over the rows converged in both."""
+    scene64 = make("float64")
+    q64, ok64 = tips["float64"]
+    q32, ok32 = tips["float32"]
+    both = ok64 & ok32
+    diff = np.linalg.norm(
+        np.asarray(_tips(scene64, jnp.asarray(q64))) - np.asarray(_tips(scene64, jnp.asarray(q32))),
+        axis=1,
+    )
+    return {
+        "batch": batch,
+        "rows_both_converged": int(both.sum()),
+        "max_tip_difference_m": float(diff[both].max()) if both.any() else None,
+        "median_tip_difference_m": float(np.median(diff[both])) if both.any() else None,
+    }
+
+
+def _measure_baseline(record, model, scene, commands, log, checkpoint) -> None:
+    """One model's plain-flow baseline into ``record["baselines"]``."""
+    log(f"{model} float64 plain-flow baseline, batch {len(commands)} ...")
+    base, _ = bench_flow_baseline(scene, commands, TOLERANCES["float64"])
+    record["baselines"][model] = base
+    checkpoint()
+    log(
+        f"  {base['equilibria_per_s']:.2f} eq/s, compile {base['compile_s']:.1f} s, "
+        f"converged {base['converged']:.1%}"
+    )
+
+
+def _measure_gradient(record, model, scene, commands, log, checkpoint) -> None:
+    """One model's gradient cost into ``record["gradients"]``."""
+    log(f"{model} float64 gradient through a batch of {len(commands)} ...")
+    g = bench_gradient(scene, commands, TOLERANCES["float64"])
+    record["gradients"][model] = g
+    checkpoint()
+    log(f"  gradient / forward = {g['gradient_over_forward']:.2f}")
 
 
 def _ratios(record: dict) -> None:
@@ -382,19 +448,41 @@ def _ratios(record: dict) -> None:
 
 def to_markdown(record: dict) -> str:
     """The record as Markdown tables."""
-    m = record["machine"]
     lines = [
         f"# pacjax bench: equilibria of {record['config']['scene']}",
         "",
+        _machine_line(record["machine"]),
+        "",
+        *_results_table(record["results"]),
+    ]
+    if record["baselines"]:
+        lines += _baselines_table(record["baselines"])
+    if record["gradients"]:
+        lines += _gradients_table(record["gradients"])
+    if record["float32_vs_float64"]:
+        lines += _dtype_lines(record["float32_vs_float64"])
+    lines += ["", "compile = first call - warm call (or a persistent-cache load).", ""]
+    return "\n".join(lines)
+
+
+def _machine_line(m: dict) -> str:
+    """The processor, backend, JAX version and platform (and the load, where known) in one
+    line."""
+    return (
         f"{m['processor']}, {m['cpu_count']} CPUs, {m['backend']} ({', '.join(m['devices'])}), "
         f"jax {m['jax']}, {m['platform']}"
-        + (f", load average {m['load_average_1min']:.1f}" if "load_average_1min" in m else ""),
-        "",
+        + (f", load average {m['load_average_1min']:.1f}" if "load_average_1min" in m else "")
+    )
+
+
+def _results_table(results: list) -> list[str]:
+    """The batch solver's rows: one per model x dtype x batch size."""
+    lines = [
         "| model | dtype | batch | tol | compile (s) | run (s) | eq/s | vs plain flow | "
         "converged | max residual | steps |",
         "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
-    for r in record["results"]:
+    for r in results:
         ratio = f"{r['vs_flow_baseline']:.0f}x" if r.get("vs_flow_baseline") else "-"
         res = r["max_residual_converged"]
         lines.append(
@@ -403,47 +491,58 @@ def to_markdown(record: dict) -> str:
             f"{r['converged']:.1%} | {'-' if res is None else f'{res:.1e}'} | "
             f"{r['steps_median']:.0f} |"
         )
-    if record["baselines"]:
-        lines += [
-            "",
-            "Plain-flow baseline (`D qdot = -F`, diffrax Kvaerno5, PID control, steady-state "
-            "event at the same tolerance, vmapped, float64):",
-            "",
-            "| model | batch | compile (s) | run (s) | eq/s | converged | steps |",
-            "|---|---|---|---|---|---|---|",
-        ]
-        for model, b in record["baselines"].items():
-            lines.append(
-                f"| {model} | {b['batch']} | {b['compile_s']:.1f} | {b['run_s']:.2f} | "
-                f"{b['equilibria_per_s']:.2f} | {b['converged']:.0%} | {b['steps_median']:.0f} |"
-            )
-    if record["gradients"]:
-        lines += [
-            "",
-            "Gradient of the sum of tip x w.r.t. the commands through a vmapped "
-            "`pj.solve_equilibrium` (float64, implicit function theorem):",
-            "",
-            "| model | batch | forward (s) | gradient (s) | gradient / forward | "
-            "compile fwd / grad (s) |",
-            "|---|---|---|---|---|---|",
-        ]
-        for model, g in record["gradients"].items():
-            lines.append(
-                f"| {model} | {g['batch']} | {g['forward_run_s']:.3f} | "
-                f"{g['gradient_run_s']:.3f} | {g['gradient_over_forward']:.2f} | "
-                f"{g['forward_compile_s']:.1f} / {g['gradient_compile_s']:.1f} |"
-            )
-    if record["float32_vs_float64"]:
-        lines += ["", "float32 against float64 (same commands, rows converged in both):", ""]
-        for model, a in record["float32_vs_float64"].items():
-            mx = a["max_tip_difference_m"]
-            lines.append(
-                f"- {model}, batch {a['batch']}: max tip difference "
-                + ("-" if mx is None else f"{1e3 * mx:.2g} mm")
-                + f" over {a['rows_both_converged']} rows"
-            )
-    lines += ["", "compile = first call - warm call (or a persistent-cache load).", ""]
-    return "\n".join(lines)
+    return lines
+
+
+def _baselines_table(baselines: dict) -> list[str]:
+    """The plain-flow baseline per model, under a line saying what it is."""
+    lines = [
+        "",
+        "Plain-flow baseline (`D qdot = -F`, diffrax Kvaerno5, PID control, steady-state "
+        "event at the same tolerance, vmapped, float64):",
+        "",
+        "| model | batch | compile (s) | run (s) | eq/s | converged | steps |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for model, b in baselines.items():
+        lines.append(
+            f"| {model} | {b['batch']} | {b['compile_s']:.1f} | {b['run_s']:.2f} | "
+            f"{b['equilibria_per_s']:.2f} | {b['converged']:.0%} | {b['steps_median']:.0f} |"
+        )
+    return lines
+
+
+def _gradients_table(gradients: dict) -> list[str]:
+    """The gradient's cost against the forward solve, per model."""
+    lines = [
+        "",
+        "Gradient of the sum of tip x w.r.t. the commands through a vmapped "
+        "`pj.solve_equilibrium` (float64, implicit function theorem):",
+        "",
+        "| model | batch | forward (s) | gradient (s) | gradient / forward | "
+        "compile fwd / grad (s) |",
+        "|---|---|---|---|---|---|",
+    ]
+    for model, g in gradients.items():
+        lines.append(
+            f"| {model} | {g['batch']} | {g['forward_run_s']:.3f} | "
+            f"{g['gradient_run_s']:.3f} | {g['gradient_over_forward']:.2f} | "
+            f"{g['forward_compile_s']:.1f} / {g['gradient_compile_s']:.1f} |"
+        )
+    return lines
+
+
+def _dtype_lines(comparisons: dict) -> list[str]:
+    """float32 against float64: a bullet per model."""
+    lines = ["", "float32 against float64 (same commands, rows converged in both):", ""]
+    for model, a in comparisons.items():
+        mx = a["max_tip_difference_m"]
+        lines.append(
+            f"- {model}, batch {a['batch']}: max tip difference "
+            + ("-" if mx is None else f"{1e3 * mx:.2g} mm")
+            + f" over {a['rows_both_converged']} rows"
+        )
+    return lines
 
 
 def parse_list(text: str, kind=str) -> list:

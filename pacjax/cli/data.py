@@ -69,18 +69,13 @@ def fit(
     curve, predicted vs measured backbones and an error histogram (PNG).
     """
     from ..io.mocapfile import load_mocap
-    from ..io.scenefile import load_scene, save_scene
+    from ..io.scenefile import load_scene
 
     try:
         scene, _, extra = load_scene(scene_file)
     except (ValueError, OSError) as err:
         raise click.ClickException(str(err)) from None
-    with open(data_file, encoding="utf-8-sig") as f:
-        if f.readline().startswith("Format Version"):
-            raise click.ClickException(
-                f"{data_file} is a Motive export: attach the robot's commands and pick static "
-                "frames with pacjax.io.mocapfile.motive_dataset, then save_mocap it"
-            )
+    _reject_motive_export(data_file)
     try:
         data = load_mocap(data_file)
         fitted, report = pj.identify(
@@ -97,8 +92,29 @@ def fit(
         )
     except (ValueError, TypeError) as err:
         raise click.ClickException(str(err)) from None
-    out = output_dir(out)
     name = extra["name"]
+    paths = _write_fit(output_dir(out), name, fitted, report, no_plot)
+    _echo_fit(name, report)
+    for path in paths.values():
+        click.echo(f"wrote {path}")
+
+
+def _reject_motive_export(data_file: str) -> None:
+    """A Motive export is a time series without commands: say how to turn it into static frames,
+    rather than fail on its columns."""
+    with open(data_file, encoding="utf-8-sig") as f:
+        if f.readline().startswith("Format Version"):
+            raise click.ClickException(
+                f"{data_file} is a Motive export: attach the robot's commands and pick static "
+                "frames with pacjax.io.mocapfile.motive_dataset, then save_mocap it"
+            )
+
+
+def _write_fit(out: str, name: str, fitted, report, no_plot: bool) -> dict:
+    """The fitted scene, the report (JSON, Markdown) and, unless ``no_plot``, the figures;
+    returns ``{what: path}`` in the order written."""
+    from ..io.scenefile import save_scene
+
     paths = {
         "scene": os.path.join(out, f"{name}_fitted.toml"),
         "json": os.path.join(out, f"{name}_fit.json"),
@@ -117,6 +133,12 @@ def fit(
         fitplots.plot_loss(report, paths["loss"])
         fitplots.plot_backbones(fitted, report, paths["backbones"])
         fitplots.plot_error_histogram(report, paths["errors"])
+    return paths
+
+
+def _echo_fit(name: str, report) -> None:
+    """The fit's outcome, each fitted value (with its standard deviation where known) and the
+    train / held-out RMSE."""
     click.echo(f"{name}: {report.message}; {report.iterations} iterations, {report.time_s:.1f} s")
     for pname, p in report.parameters.items():
         for label, value, std in zip(p["labels"], p["value"], p["std"], strict=True):
@@ -128,8 +150,6 @@ def fit(
         failed = int((~errors.converged).sum())
         note = f", {failed} not converged: not in the RMSE" if failed else ""
         click.echo(f"{label} RMSE {errors.rmse_mm:.3f} mm ({len(errors.q)} frames{note})")
-    for path in paths.values():
-        click.echo(f"wrote {path}")
 
 
 # ------------------------------------------------------------------------------ inverse
@@ -211,6 +231,30 @@ def inverse(
     name = extra["name"]
     options = dict(reached_tol=tol, upper=upper, max_tension=max_tension)
     options["options"] = solver_options(extra)
+    result, seconds = _solve_targets(scene_file, scene, targets, independent, options)
+
+    reached = np.asarray(result.reached)
+    csv_path = os.path.join(out, f"{name}_commands.csv")
+    _write_commands(csv_path, scene.n_tendons, targets, result)
+    controls = np.asarray(result.controls)
+    jumps = np.abs(np.diff(controls, axis=0)).max() if len(controls) > 1 else 0.0
+    click.echo(
+        f"{name}: {int(reached.sum())}/{len(targets)} targets reached within {1e3 * tol:g} mm, "
+        f"largest error {1e3 * float(np.max(result.error)):.3g} mm, {seconds:.1f} s"
+    )
+    click.echo(f"largest command change between neighbouring rows: {1e3 * jumps:.2f} mm")
+    click.echo(f"wrote {csv_path}")
+    if not no_plot:
+        png_path = os.path.join(out, f"{name}_inverse.png")
+        _plot_inverse(png_path, scene, name, targets, result)
+        click.echo(f"wrote {png_path}")
+    if not reached.all():
+        sys.exit(3)
+
+
+def _solve_targets(scene_file: str, scene, targets: np.ndarray, independent: bool, options):
+    """``(result per target, seconds)``: every target from fresh starts, or the rows as a path
+    (:func:`pacjax.track`, each warm-started from the previous one)."""
     start = time.perf_counter()
     try:
         if independent:
@@ -220,18 +264,21 @@ def inverse(
             result = pj.track(scene, targets, **options).waypoints
     except ValueError as err:
         raise click.ClickException(f"{scene_file}: {err}") from None
-    seconds = time.perf_counter() - start
+    return result, time.perf_counter() - start
 
+
+def _write_commands(path: str, n_tendons: int, targets: np.ndarray, result) -> None:
+    """``<name>_commands.csv``: per target, whether it was reached, the error, the tip, the
+    commands, the tensions and the iterations."""
     controls = np.asarray(result.controls)
     reached = np.asarray(result.reached)
-    csv_path = os.path.join(out, f"{name}_commands.csv")
     header = (
         ["target_x", "target_y", "target_z", "reached", "error_m", "tip_x", "tip_y", "tip_z"]
-        + [f"u{i}" for i in range(scene.n_tendons)]
-        + [f"tension{i}" for i in range(scene.n_tendons)]
+        + [f"u{i}" for i in range(n_tendons)]
+        + [f"tension{i}" for i in range(n_tendons)]
         + ["iterations"]
     )
-    with open(csv_path, "w", encoding="utf-8") as f:
+    with open(path, "w", encoding="utf-8") as f:
         f.write("# pacjax inverse: commands u (m pull-in, or N tension), tensions N, lengths m\n")
         f.write(",".join(header) + "\n")
         for i in range(len(targets)):
@@ -239,27 +286,21 @@ def inverse(
             row += list(np.asarray(result.position[i])) + list(controls[i])
             row += list(np.asarray(result.tensions[i])) + [int(result.iterations[i])]
             f.write(",".join(f"{v:.9g}" if isinstance(v, float) else str(v) for v in row) + "\n")
-    jumps = np.abs(np.diff(controls, axis=0)).max() if len(controls) > 1 else 0.0
-    click.echo(
-        f"{name}: {int(reached.sum())}/{len(targets)} targets reached within {1e3 * tol:g} mm, "
-        f"largest error {1e3 * float(np.max(result.error)):.3g} mm, {seconds:.1f} s"
-    )
-    click.echo(f"largest command change between neighbouring rows: {1e3 * jumps:.2f} mm")
-    click.echo(f"wrote {csv_path}")
-    if not no_plot:
-        from ..plots import equilibria as plots
 
-        png_path = os.path.join(out, f"{name}_inverse.png")
-        shown = np.unique(np.linspace(0, len(targets) - 1, min(len(targets), 6)).astype(int))
-        cases = {f"target {i + 1}": np.asarray(result.q[i]) for i in shown}
-        plots.plot_equilibria(
-            scene,
-            cases,
-            png_path,
-            title=f"{name}: reached backbones ({int(reached.sum())}/{len(targets)} reached)",
-            markers=False,
-            targets={"target": targets, "reached tip": np.asarray(result.position)},
-        )
-        click.echo(f"wrote {png_path}")
-    if not reached.all():
-        sys.exit(3)
+
+def _plot_inverse(path: str, scene, name: str, targets: np.ndarray, result) -> None:
+    """``<name>_inverse.png``: up to six reached backbones, evenly spread over the rows, with the
+    targets and the reached tips."""
+    from ..plots import equilibria as plots
+
+    reached = np.asarray(result.reached)
+    shown = np.unique(np.linspace(0, len(targets) - 1, min(len(targets), 6)).astype(int))
+    cases = {f"target {i + 1}": np.asarray(result.q[i]) for i in shown}
+    plots.plot_equilibria(
+        scene,
+        cases,
+        path,
+        title=f"{name}: reached backbones ({int(reached.sum())}/{len(targets)} reached)",
+        markers=False,
+        targets={"target": targets, "reached tip": np.asarray(result.position)},
+    )

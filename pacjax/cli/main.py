@@ -90,9 +90,18 @@ def main() -> None:
 )
 def demo(out: str, tip_mass: float):
     """Solve the paper's robot (PCC and PAC) under a few tendon commands."""
-    from ..plots import equilibria as plots
-
     out = output_dir(out)
+    rows, compile_s, groups = _solve_demo(tip_mass)
+    tips = {(c, m): tip for c, m, tip, _, _ in rows}
+    _echo_demo_table(rows, tips, compile_s, tip_mass)
+    path = _plot_demo(groups, tips, out, tip_mass)
+    click.echo(f"wrote {path}")
+
+
+def _solve_demo(tip_mass: float):
+    """Every demo command with every model, each solved twice (the second, already compiled,
+    times the solve alone); returns the table's rows ``(command, model, tip, eq, warm s)``, each
+    model's compile time and ``{command: {model: (scene, q)}}`` for the figure."""
     rows = []
     compile_s = {}
     groups: dict[str, dict] = {name: {} for name in DEMO_COMMANDS}
@@ -113,8 +122,11 @@ def demo(out: str, tip_mass: float):
                 (tip, _), _, _ = summary(scene, eq.q, np.asarray(controls))
                 rows.append((command, model_name, np.asarray(tip), eq, warm))
                 groups[command][model_name] = (scene, eq.q)
+    return rows, compile_s, groups
 
-    tips = {(c, m): tip for c, m, tip, _, _ in rows}
+
+def _echo_demo_table(rows, tips: dict, compile_s: dict, tip_mass: float) -> None:
+    """The demo's table (tips, PAC-PCC differences, convergence, timings) and the commands."""
     head = (
         f"{'command':<16} {'model':<5} {'tip x':>8} {'tip y':>8} {'tip z':>8} "
         f"{'PAC-PCC':>8} {'conv':>5} {'stable':>6} {'residual':>9} {'steps':>5} {'ms':>7}"
@@ -145,6 +157,11 @@ def demo(out: str, tip_mass: float):
         sections = ["  ".join(f"{u:5.3f}" for u in controls[k : k + 3]) for k in (0, 3, 6)]
         click.echo(f"  {command:<16} " + "  |  ".join(sections))
 
+
+def _plot_demo(groups: dict, tips: dict, out: str, tip_mass: float) -> str:
+    """``demo.png``: one column per command, PCC and PAC overlaid; returns its path."""
+    from ..plots import equilibria as plots
+
     titled = {}
     for command, cases in groups.items():
         diff = 1e3 * np.linalg.norm(tips[command, "PAC"] - tips[command, "PCC"])
@@ -158,7 +175,7 @@ def demo(out: str, tip_mass: float):
             "PCC vs PAC under four tendon commands"
         ),
     )
-    click.echo(f"wrote {path}")
+    return path
 
 
 # ------------------------------------------------------------------------------ solve
@@ -189,6 +206,30 @@ def solve(scene_file: str, controls: str | None, out: str, no_plot: bool):
     except ValueError as err:
         raise click.ClickException(f"{scene_file}: {err}") from None
 
+    result, tip = _solve_result(scene_file, name, scene, u, eq, seconds)
+    json_path = os.path.join(out, f"{name}.json")
+    write_json(json_path, result, indent=2)
+    _echo_solve(name, eq, result, seconds, tip)
+    click.echo(f"wrote {json_path}")
+    if not no_plot:
+        from ..plots import equilibria as plots
+
+        png_path = os.path.join(out, f"{name}.png")
+        label = f"{result['model']} ({'converged' if result['converged'] else 'not converged'})"
+        plots.plot_equilibria(
+            scene,
+            {label: eq.q},
+            png_path,
+            title=f"{name}: " + (extra["description"] or os.path.basename(scene_file)),
+        )
+        click.echo(f"wrote {png_path}")
+    if not result["converged"]:
+        sys.exit(3)
+
+
+def _solve_result(scene_file: str, name: str, scene, u, eq, seconds: float):
+    """``(record, tip position)`` of one solve: the record is ``<name>.json``'s content; the tip
+    is returned as computed (the scene's dtype) for the printed summary."""
     (tip, rotation), marker_positions, tensions = summary(scene, eq.q, u)
     result = {
         "scene": os.path.abspath(scene_file),
@@ -220,10 +261,11 @@ def solve(scene_file: str, controls: str | None, out: str, no_plot: bool):
         }
     if tensions is not None:
         result["tendon_tensions"] = [float(v) for v in np.asarray(tensions)]
+    return result, tip
 
-    json_path = os.path.join(out, f"{name}.json")
-    write_json(json_path, result, indent=2)
 
+def _echo_solve(name: str, eq, result: dict, seconds: float, tip) -> None:
+    """The solve's status, tip position (mm) and tendon tensions, one line each."""
     status = "converged" if result["converged"] else f"NOT converged ({eq.reason})"
     stability = "stable" if result["stable"] else "UNSTABLE (saddle)"
     t = 1e3 * np.asarray(tip)
@@ -235,21 +277,6 @@ def solve(scene_file: str, controls: str | None, out: str, no_plot: bool):
     if result["tendon_tensions"] is not None:
         tensions = ", ".join(f"{v:.3g}" for v in result["tendon_tensions"])
         click.echo(f"tendon tensions (N): {tensions}")
-    click.echo(f"wrote {json_path}")
-    if not no_plot:
-        from ..plots import equilibria as plots
-
-        png_path = os.path.join(out, f"{name}.png")
-        label = f"{result['model']} ({'converged' if result['converged'] else 'not converged'})"
-        plots.plot_equilibria(
-            scene,
-            {label: eq.q},
-            png_path,
-            title=f"{name}: " + (extra["description"] or os.path.basename(scene_file)),
-        )
-        click.echo(f"wrote {png_path}")
-    if not result["converged"]:
-        sys.exit(3)
 
 
 for _command in (fit, inverse, simulate, batch, bench):

@@ -187,27 +187,11 @@ def batch(scene_file, n, sampler, seed, low, high, chunk_size, tol, use_float32,
     file as they are solved, with a workspace plot and a JSON summary."""
     import jax.numpy as jnp
 
-    from ..io.scenefile import load_scene
     from . import batchrun
 
-    # Everything is checked before anything is compiled.
-    try:
-        scene, _, extra = load_scene(scene_file)
-        default_low, default_high = batchrun.default_ranges(scene)
-        lo, hi = batchrun.check_ranges(
-            default_low if low is None else _per_tendon(low, "--low"),
-            default_high if high is None else _per_tendon(high, "--high"),
-            scene.n_tendons,
-        )
-        commands = batchrun.sample_commands(sampler, n, lo, hi, seed)
-        options = dict(extra["solver"])
-        if tol is not None:
-            options["tol"] = tol
-        elif use_float32 and "tol" not in options:
-            options["tol"] = 1e-4
-        pj.SolverOptions(**{k: v for k, v in options.items() if k != "fallback"})
-    except (ValueError, TypeError, OSError) as err:
-        raise click.ClickException(f"{scene_file}: {err}") from None
+    scene, extra, lo, hi, commands, options = _batch_inputs(
+        scene_file, n, sampler, seed, low, high, tol, use_float32
+    )
     if use_float32:
         scene = pj.astype(scene, jnp.float32)
     out = output_dir(out)
@@ -216,17 +200,7 @@ def batch(scene_file, n, sampler, seed, low, high, chunk_size, tol, use_float32,
         "h5": os.path.join(out, f"{name}_batch.h5"),
         "json": os.path.join(out, f"{name}_batch.json"),
     }
-    with open(scene_file, encoding="utf-8") as f:
-        scene_text = f.read()
-    attrs = {
-        "scene_toml": scene_text,
-        "sampler": sampler,
-        "seed": seed,
-        "low": lo,
-        "high": hi,
-        "dtype": "float32" if use_float32 else "float64",
-        "tol": float(options.get("tol", pj.SolverOptions().tol)),
-    }
+    attrs = _batch_attrs(scene_file, sampler, seed, lo, hi, use_float32, options)
     if len(commands) != n:
         click.echo(
             f"grid: {round(len(commands) ** (1 / scene.n_tendons))} values per tendon, "
@@ -254,9 +228,7 @@ def batch(scene_file, n, sampler, seed, low, high, chunk_size, tol, use_float32,
         **summary.as_dict(),
         "file": os.path.abspath(paths["h5"]),
     }
-    with open(paths["json"], "w", encoding="utf-8") as f:
-        json.dump(report, f, indent=2)
-        f.write("\n")
+    write_json(paths["json"], report, indent=2)
     click.echo(f"{name} ({report['model']}, {report['dtype']}, {sampler} sampling):")
     for line in summary.lines():
         click.echo("  " + line)
@@ -266,6 +238,49 @@ def batch(scene_file, n, sampler, seed, low, high, chunk_size, tol, use_float32,
         )
     for path in paths.values():
         click.echo(f"wrote {path}")
+
+
+def _batch_inputs(scene_file, n, sampler, seed, low, high, tol, use_float32):
+    """``(scene, extra, lo, hi, commands, solver options)`` of ``pacjax batch``, every one checked
+    before anything is compiled (a bad range or option fails at once, not after a compilation);
+    errors are one-line :class:`click.ClickException` naming the file."""
+    from ..io.scenefile import load_scene
+    from . import batchrun
+
+    try:
+        scene, _, extra = load_scene(scene_file)
+        default_low, default_high = batchrun.default_ranges(scene)
+        lo, hi = batchrun.check_ranges(
+            default_low if low is None else _per_tendon(low, "--low"),
+            default_high if high is None else _per_tendon(high, "--high"),
+            scene.n_tendons,
+        )
+        commands = batchrun.sample_commands(sampler, n, lo, hi, seed)
+        options = dict(extra["solver"])
+        if tol is not None:
+            options["tol"] = tol
+        elif use_float32 and "tol" not in options:
+            options["tol"] = 1e-4
+        pj.SolverOptions(**{k: v for k, v in options.items() if k != "fallback"})
+    except (ValueError, TypeError, OSError) as err:
+        raise click.ClickException(f"{scene_file}: {err}") from None
+    return scene, extra, lo, hi, commands, options
+
+
+def _batch_attrs(scene_file, sampler, seed, lo, hi, use_float32, options) -> dict:
+    """The HDF5 file's attributes: the scene file's text and how the commands were drawn and
+    solved, so that the file alone says how to reproduce it."""
+    with open(scene_file, encoding="utf-8") as f:
+        scene_text = f.read()
+    return {
+        "scene_toml": scene_text,
+        "sampler": sampler,
+        "seed": seed,
+        "low": lo,
+        "high": hi,
+        "dtype": "float32" if use_float32 else "float64",
+        "tol": float(options.get("tol", pj.SolverOptions().tol)),
+    }
 
 
 # ------------------------------------------------------------------------------ bench

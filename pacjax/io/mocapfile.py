@@ -189,9 +189,47 @@ def _cell(text: str, where: str) -> float:
 def load_mocap(path) -> MocapDataset:
     """Read a pacjax mocap CSV (see the module docstring); errors name the file and column."""
     path = os.fspath(path)
-    header: dict = {}
     with open(path, encoding="utf-8", newline="") as f:
         lines = f.read().splitlines()
+    header, body_start = _read_header(path, lines)
+    columns, data = _read_rows(path, lines[body_start:])
+    scale = _length_scale(path, header)
+    n_markers = len(header["sites"])
+    table = _Columns(path, columns, data)
+    n_u = _check_columns(path, table, n_markers)
+    controls = table.stack([f"u{i}" for i in range(n_u)])
+    if np.any(np.isnan(controls)):
+        raise ValueError(f"{path}: controls (u columns) must not be empty or NaN")
+    markers = (
+        np.stack([table.stack([f"m{j}_{a}" for a in "xyz"]) for j in range(n_markers)], 1) * scale
+    )
+    payload = table.get("payload_mass") if "payload_mass" in table else None
+    force = _read_force(path, table)
+    orientations = _read_orientations(path, table, n_markers)
+    try:
+        return MocapDataset.from_arrays(
+            controls,
+            markers,
+            [tuple(s) if not isinstance(s, list) else tuple(s) for s in header["sites"]],
+            payload,
+            payload_site=header.get("payload_site"),
+            force=force,
+            force_site=header.get("force_site"),
+            force_follower=bool(header.get("force_follower", False)),
+            orientations=orientations,
+            time=table.get("time") if "time" in table else None,
+        )
+    except ValueError as err:
+        raise ValueError(f"{path}: {err}") from None
+
+
+def _read_header(path: str, lines: list[str]) -> tuple[dict, int]:
+    """The ``# key = JSON value`` lines at the top: ``(header, index of the column line)``.
+
+    ``#`` lines without ``=`` (the ``# pacjax mocap 1`` tag, remarks) are skipped; an unknown key
+    is an error, so that a typo does not silently drop a setting.
+    """
+    header: dict = {}
     body_start = 0
     for k, line in enumerate(lines):
         if not line.startswith("#"):
@@ -213,7 +251,13 @@ def load_mocap(path) -> MocapDataset:
         raise ValueError(f"{path}: no column line after the header")
     if "sites" not in header:
         raise ValueError(f"{path}: the header must give the marker sites ('# sites = [[0, 1.0]]')")
-    rows = list(csv.reader(lines[body_start:]))
+    return header, body_start
+
+
+def _read_rows(path: str, lines: list[str]) -> tuple[list[str], list[list[str]]]:
+    """``(column names, data rows)`` of the CSV body; blank rows are dropped, every other row
+    must have one cell per column."""
+    rows = list(csv.reader(lines))
     columns = [c.strip() for c in rows[0]]
     data = [r for r in rows[1:] if any(c.strip() for c in r)]
     if not data:
@@ -223,22 +267,45 @@ def load_mocap(path) -> MocapDataset:
             raise ValueError(
                 f"{path}: data row {k} has {len(r)} cells, the column line has {len(columns)}"
             )
+    return columns, data
+
+
+def _length_scale(path: str, header: dict) -> float:
+    """Metres per length unit of the marker columns (the header's ``length_unit``)."""
     unit = header.get("length_unit", "m")
     if unit not in _UNITS:
         raise ValueError(f"{path}: length_unit must be one of {list(_UNITS)}, got {unit!r}")
-    scale = _UNITS[unit]
-    n_markers = len(header["sites"])
-    col = {name: i for i, name in enumerate(columns)}
-    if len(col) != len(columns):
-        raise ValueError(f"{path}: duplicate column names")
+    return _UNITS[unit]
 
-    def get(name: str) -> np.ndarray:
-        return np.array(
-            [_cell(r[col[name]], f"{path}, column {name}, row {k}") for k, r in enumerate(data)]
-        )
 
+class _Columns:
+    """The data rows by column name; cells are parsed when a column is read, so that an error
+    names the column and the row."""
+
+    def __init__(self, path: str, columns: list[str], data: list[list[str]]):
+        self.path, self.columns, self.data = path, columns, data
+        self.index = {name: i for i, name in enumerate(columns)}
+        if len(self.index) != len(columns):
+            raise ValueError(f"{path}: duplicate column names")
+
+    def __contains__(self, name: str) -> bool:
+        return name in self.index
+
+    def get(self, name: str) -> np.ndarray:
+        """(frames,) values of one column, NaN where empty."""
+        i, where = self.index[name], f"{self.path}, column {name}"
+        return np.array([_cell(r[i], f"{where}, row {k}") for k, r in enumerate(self.data)])
+
+    def stack(self, names) -> np.ndarray:
+        """(frames, len(names)) values of several columns."""
+        return np.stack([self.get(name) for name in names], 1)
+
+
+def _check_columns(path: str, table: _Columns, n_markers: int) -> int:
+    """The number of controls (``u0``, ``u1``, ... without a gap), after checking that every
+    column is known and that every site has its marker columns."""
     n_u = 0
-    while f"u{n_u}" in col:
+    while f"u{n_u}" in table:
         n_u += 1
     if n_u == 0:
         raise ValueError(f"{path}: no control columns (u0, u1, ...)")
@@ -246,54 +313,40 @@ def load_mocap(path) -> MocapDataset:
     known |= {f"u{i}" for i in range(n_u)}
     known |= {f"m{j}_{a}" for j in range(n_markers) for a in "xyz"}
     known |= {f"m{j}_q{a}" for j in range(n_markers) for a in "wxyz"}
-    unknown = [c for c in columns if c not in known]
+    unknown = [c for c in table.columns if c not in known]
     if unknown:
         raise ValueError(
             f"{path}: unknown column(s) {unknown} (controls u0..u{n_u - 1}, markers m0..m"
             f"{n_markers - 1} from the header's sites; see pacjax.io.mocapfile)"
         )
-    missing = [f"m{j}_{a}" for j in range(n_markers) for a in "xyz" if f"m{j}_{a}" not in col]
+    missing = [f"m{j}_{a}" for j in range(n_markers) for a in "xyz" if f"m{j}_{a}" not in table]
     if missing:
         raise ValueError(f"{path}: missing marker column(s) {missing[:6]} for the header's sites")
-    controls = np.stack([get(f"u{i}") for i in range(n_u)], 1)
-    if np.any(np.isnan(controls)):
-        raise ValueError(f"{path}: controls (u columns) must not be empty or NaN")
-    markers = (
-        np.stack([np.stack([get(f"m{j}_{a}") for a in "xyz"], 1) for j in range(n_markers)], 1)
-        * scale
-    )
-    payload = get("payload_mass") if "payload_mass" in col else None
-    force = None
-    force_cols = [c for c in ("force_x", "force_y", "force_z") if c in col]
-    if force_cols:
-        if len(force_cols) != 3:
-            raise ValueError(f"{path}: force needs all of force_x, force_y, force_z")
-        force = np.stack([get(c) for c in ("force_x", "force_y", "force_z")], 1)
-    quat_cols = [f"m{j}_q{a}" for j in range(n_markers) for a in "wxyz"]
-    orientations = None
-    if any(c in col for c in quat_cols):
-        absent = [c for c in quat_cols if c not in col]
-        if absent:
-            raise ValueError(f"{path}: orientation columns incomplete, missing {absent[:4]}")
-        quats = np.stack(
-            [np.stack([get(f"m{j}_q{a}") for a in "wxyz"], 1) for j in range(n_markers)], 1
-        )
-        orientations = quaternion_to_matrix(quats)
-    try:
-        return MocapDataset.from_arrays(
-            controls,
-            markers,
-            [tuple(s) if not isinstance(s, list) else tuple(s) for s in header["sites"]],
-            payload,
-            payload_site=header.get("payload_site"),
-            force=force,
-            force_site=header.get("force_site"),
-            force_follower=bool(header.get("force_follower", False)),
-            orientations=orientations,
-            time=get("time") if "time" in col else None,
-        )
-    except ValueError as err:
-        raise ValueError(f"{path}: {err}") from None
+    return n_u
+
+
+def _read_force(path: str, table: _Columns) -> np.ndarray | None:
+    """(frames, 3) N from ``force_x, force_y, force_z`` (all three or none), else None."""
+    names = ("force_x", "force_y", "force_z")
+    present = [c for c in names if c in table]
+    if not present:
+        return None
+    if len(present) != 3:
+        raise ValueError(f"{path}: force needs all of force_x, force_y, force_z")
+    return table.stack(names)
+
+
+def _read_orientations(path: str, table: _Columns, n_markers: int) -> np.ndarray | None:
+    """(frames, markers, 3, 3) rotations from the ``m{j}_q{w,x,y,z}`` columns (every marker's or
+    none), else None."""
+    names = [f"m{j}_q{a}" for j in range(n_markers) for a in "wxyz"]
+    if not any(c in table for c in names):
+        return None
+    absent = [c for c in names if c not in table]
+    if absent:
+        raise ValueError(f"{path}: orientation columns incomplete, missing {absent[:4]}")
+    quats = np.stack([table.stack([f"m{j}_q{a}" for a in "wxyz"]) for j in range(n_markers)], 1)
+    return quaternion_to_matrix(quats)
 
 
 # ------------------------------------------------------------------------------ Motive CSV
@@ -343,44 +396,76 @@ def read_motive_csv(path, length_unit: str | None = None) -> MotiveTake:
     path = os.fspath(path)
     with open(path, encoding="utf-8-sig", newline="") as f:
         rows = list(csv.reader(f))
+    metadata = _motive_metadata(path, rows)
+    type_row = rows[_find_motive_row(path, rows, "Type", 1)]
+    name_row = rows[_find_motive_row(path, rows, "Name", 1)]
+    head = _find_motive_row(path, rows, "Frame", 0)
+    group_row, axis_row = rows[head - 1], rows[head]
+    scale = _motive_scale(path, metadata.get("Length Units", length_unit))
+    rotation_type = metadata.get("Rotation Type", "Quaternion")
+    table = _motive_table(path, rows[head + 1 :], len(axis_row))
+    groups = _motive_groups(type_row, name_row, group_row, axis_row)
+    markers, bodies = _motive_tracks(path, groups, table, scale, rotation_type)
+    return MotiveTake(
+        time=table[:, 1], frame=table[:, 0], markers=markers, rigid_bodies=bodies, metadata=metadata
+    )
+
+
+def _motive_metadata(path: str, rows: list[list[str]]) -> dict:
+    """The first line's ``key, value, key, value, ...`` cells, after checking that it is one."""
     if not rows or not rows[0] or rows[0][0].strip() != "Format Version":
         raise ValueError(f"{path}: not a Motive CSV export (first cell must be 'Format Version')")
-    meta_cells = [c.strip() for c in rows[0]]
-    metadata = {meta_cells[k]: meta_cells[k + 1] for k in range(0, len(meta_cells) - 1, 2)}
+    cells = [c.strip() for c in rows[0]]
+    return {cells[k]: cells[k + 1] for k in range(0, len(cells) - 1, 2)}
 
-    def find(label: str, column: int) -> int:
-        for k, r in enumerate(rows[:12]):
-            if len(r) > column and r[column].strip() == label:
-                return k
-        raise ValueError(f"{path}: Motive header row {label!r} not found")
 
-    type_row, name_row = rows[find("Type", 1)], rows[find("Name", 1)]
-    head = find("Frame", 0)
-    group_row, axis_row = rows[head - 1], rows[head]
-    unit = metadata.get("Length Units", length_unit)
+def _find_motive_row(path: str, rows: list[list[str]], label: str, column: int) -> int:
+    """Index of the header row whose cell ``column`` is ``label`` (among the first 12 rows)."""
+    for k, r in enumerate(rows[:12]):
+        if len(r) > column and r[column].strip() == label:
+            return k
+    raise ValueError(f"{path}: Motive header row {label!r} not found")
+
+
+def _motive_scale(path: str, unit: str | None) -> float:
+    """Metres per ``Length Units`` (the header's, else the caller's)."""
     if unit is None:
         raise ValueError(f"{path}: the export does not state its Length Units; pass length_unit=")
     if unit.lower() not in _MOTIVE_UNITS:
         raise ValueError(f"{path}: unknown Length Units {unit!r} (known: {list(_MOTIVE_UNITS)})")
-    scale = _MOTIVE_UNITS[unit.lower()]
-    rotation_type = metadata.get("Rotation Type", "Quaternion")
-    data = [r for r in rows[head + 1 :] if any(c.strip() for c in r)]
+    return _MOTIVE_UNITS[unit.lower()]
+
+
+def _motive_table(path: str, rows: list[list[str]], width: int) -> np.ndarray:
+    """(samples, width) numbers of the data rows (blank rows dropped, short rows and empty cells
+    NaN); column 0 is the frame, column 1 the time, which must be complete."""
+    data = [r for r in rows if any(c.strip() for c in r)]
     if not data:
         raise ValueError(f"{path}: no data rows")
-    width = len(axis_row)
     table = np.full((len(data), width), np.nan)
     for k, r in enumerate(data):
         for c in range(min(width, len(r))):
             table[k, c] = _cell(r[c], f"{path}, data row {k}, column {c}")
     if np.any(~np.isfinite(table[:, 1])):
         raise ValueError(f"{path}: the time column has empty cells")
-    # Group columns by (type, name, group).
+    return table
+
+
+def _motive_groups(type_row, name_row, group_row, axis_row) -> dict:
+    """``{(type, name, group): {axis: column}}`` for the columns after frame and time (header
+    rows may be shorter than the axis row: their missing cells count as empty)."""
     groups: dict[tuple[str, str, str], dict[str, int]] = {}
-    for c in range(2, width):
+    for c in range(2, len(axis_row)):
         kind = type_row[c].strip() if c < len(type_row) else ""
         name = name_row[c].strip() if c < len(name_row) else ""
         group = group_row[c].strip() if c < len(group_row) else ""
         groups.setdefault((kind, name, group), {})[axis_row[c].strip()] = c
+    return groups
+
+
+def _motive_tracks(path: str, groups: dict, table: np.ndarray, scale: float, rotation_type: str):
+    """``(markers, rigid bodies)`` by name: positions in metres; a rigid body's rotations with
+    them."""
     markers, bodies = {}, {}
     for (kind, name, group), axes in groups.items():
         if group != "Position":
@@ -390,25 +475,29 @@ def read_motive_csv(path, length_unit: str | None = None) -> MotiveTake:
         pos = table[:, [axes["X"], axes["Y"], axes["Z"]]] * scale
         if kind == "Rigid Body":
             rot_axes = groups.get((kind, name, "Rotation"))
-            if rot_axes is None:
-                raise ValueError(f"{path}: rigid body {name!r} has no Rotation columns")
-            if rotation_type != "Quaternion":
-                raise ValueError(
-                    f"{path}: Rotation Type {rotation_type!r} is not supported; export rigid "
-                    "bodies with Rotation Type 'Quaternion'"
-                )
-            quat = table[:, [rot_axes["W"], rot_axes["X"], rot_axes["Y"], rot_axes["Z"]]]
-            ok = np.isfinite(quat).all(1)
-            rot = np.full((len(table), 3, 3), np.nan)
-            rot[ok] = quaternion_to_matrix(quat[ok])
-            bodies[name] = (pos, rot)
+            bodies[name] = (pos, _motive_rotations(path, name, rot_axes, table, rotation_type))
         elif kind in ("Marker", "Rigid Body Marker", "Bone Marker"):
             markers[name] = pos
     if not markers and not bodies:
         raise ValueError(f"{path}: no marker or rigid-body position columns")
-    return MotiveTake(
-        time=table[:, 1], frame=table[:, 0], markers=markers, rigid_bodies=bodies, metadata=metadata
-    )
+    return markers, bodies
+
+
+def _motive_rotations(path: str, name: str, axes, table: np.ndarray, rotation_type: str):
+    """(samples, 3, 3) rotations of one rigid body from its quaternion columns, NaN where it was
+    not tracked."""
+    if axes is None:
+        raise ValueError(f"{path}: rigid body {name!r} has no Rotation columns")
+    if rotation_type != "Quaternion":
+        raise ValueError(
+            f"{path}: Rotation Type {rotation_type!r} is not supported; export rigid "
+            "bodies with Rotation Type 'Quaternion'"
+        )
+    quat = table[:, [axes["W"], axes["X"], axes["Y"], axes["Z"]]]
+    ok = np.isfinite(quat).all(1)
+    rot = np.full((len(table), 3, 3), np.nan)
+    rot[ok] = quaternion_to_matrix(quat[ok])
+    return rot
 
 
 def motive_dataset(

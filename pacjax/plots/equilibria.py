@@ -194,26 +194,53 @@ def draw_backbone(
     if view != "3d" and view not in _VIEWS:
         raise ValueError(f"view must be '3d' or one of {tuple(_VIEWS)}, got {view!r}")
     idx = (0, 1, 2) if view == "3d" else _VIEWS[view]
-
-    def xy(p):
-        p = np.atleast_2d(p)
-        return [p[:, i] for i in idx]
-
     arrow_mm = arrow_length([d]) if arrow_mm is None else arrow_mm
     if rings and np.any(d.radius > 0):
-        for i in d.ring_index:
-            boundary = i in d.boundary_index
-            ax.plot(
-                *xy(d.ring(i)),
-                color="0.25" if i == 0 else (color if boundary else "0.55"),
-                lw=2.2 if i == 0 else (1.0 if boundary else 0.5),
-                alpha=0.9 if i == 0 else (0.7 if boundary else 0.3),
-                zorder=1,
-            )
+        _draw_rings(ax, d, idx, color)
+    _draw_body(ax, d, idx, color, label, linestyle)
+    if markers and d.markers is not None:
+        ax.plot(
+            *_project(d.markers, idx),
+            ls="none",
+            marker="o",
+            ms=5,
+            mfc=color,
+            mec="black",
+            mew=0.8,
+            zorder=5,
+        )
+    if loads:
+        _draw_loads(ax, d, idx, color, arrow_mm, load_labels)
+    return d
+
+
+def _project(p, idx) -> list[np.ndarray]:
+    """The coordinates ``idx`` of a point (3,) or points (n, 3): what ``ax.plot`` takes."""
+    p = np.atleast_2d(p)
+    return [p[:, i] for i in idx]
+
+
+def _draw_rings(ax, d: Drawn, idx, color) -> None:
+    """Cross-section rings: the base ring dark and thick, segment ends in the case's colour,
+    the others faint (so that the tube reads as a tube without hiding the backbone)."""
+    for i in d.ring_index:
+        boundary = i in d.boundary_index
+        ax.plot(
+            *_project(d.ring(i), idx),
+            color="0.25" if i == 0 else (color if boundary else "0.55"),
+            lw=2.2 if i == 0 else (1.0 if boundary else 0.5),
+            alpha=0.9 if i == 0 else (0.7 if boundary else 0.3),
+            zorder=1,
+        )
+
+
+def _draw_body(ax, d: Drawn, idx, color, label, linestyle) -> None:
+    """The backbone (a faint wide halo under the line), the segment ends and the base."""
     solid = linestyle in ("-", "solid")
-    ax.plot(*xy(d.points), color=color, lw=8, alpha=0.15, solid_capstyle="round", zorder=2)
+    points = _project(d.points, idx)
+    ax.plot(*points, color=color, lw=8, alpha=0.15, solid_capstyle="round", zorder=2)
     ax.plot(
-        *xy(d.points),
+        *points,
         color=color,
         lw=3.0 if solid else 2.2,
         ls=linestyle,
@@ -222,7 +249,7 @@ def draw_backbone(
         zorder=3,
     )
     ax.plot(
-        *xy(d.points[d.boundary_index[1:]]),
+        *_project(d.points[d.boundary_index[1:]], idx),
         ls="none",
         marker="D",
         ms=5,
@@ -231,24 +258,23 @@ def draw_backbone(
         mew=1.5,
         zorder=4,
     )
-    ax.plot(*xy(d.points[0]), ls="none", marker="s", ms=8, color="0.3", zorder=4)
-    if markers and d.markers is not None:
-        ax.plot(
-            *xy(d.markers), ls="none", marker="o", ms=5, mfc=color, mec="black", mew=0.8, zorder=5
-        )
-    if loads:
-        for kind, p, direction, text in d.loads:
-            if kind == "mass":
-                ax.plot(*xy(p), ls="none", marker="s", ms=4, color="0.35", zorder=5)
-            elif kind == "moment":
-                ax.plot(*xy(p), ls="none", marker="$\\circlearrowleft$", ms=14, color=color)
-                if load_labels:
-                    _label(ax, xy(p), text)
-            else:
-                _arrow(ax, p, p + arrow_mm * direction, idx, color if kind == "force" else "0.2")
-                if load_labels:
-                    _label(ax, xy(p + arrow_mm * direction), text)
-    return d
+    ax.plot(*_project(d.points[0], idx), ls="none", marker="s", ms=8, color="0.3", zorder=4)
+
+
+def _draw_loads(ax, d: Drawn, idx, color, arrow_mm: float, load_labels: bool) -> None:
+    """Light point masses as small squares, moments as a circular arrow, weights and forces as
+    arrows of length ``arrow_mm`` (a weight in grey, a force in the case's colour)."""
+    for kind, p, direction, text in d.loads:
+        if kind == "mass":
+            ax.plot(*_project(p, idx), ls="none", marker="s", ms=4, color="0.35", zorder=5)
+        elif kind == "moment":
+            ax.plot(*_project(p, idx), ls="none", marker="$\\circlearrowleft$", ms=14, color=color)
+            if load_labels:
+                _label(ax, _project(p, idx), text)
+        else:
+            _arrow(ax, p, p + arrow_mm * direction, idx, color if kind == "force" else "0.2")
+            if load_labels:
+                _label(ax, _project(p + arrow_mm * direction, idx), text)
 
 
 def _arrow(ax, start, end, idx, color):
@@ -386,16 +412,48 @@ def plot_equilibrium_grid(
     labels: list[str] = []
     for cases in drawn.values():
         labels += [k for k in cases if k not in labels]
-    order = {k: i for i, k in enumerate(labels)}
     everything = [d for cases in drawn.values() for d in cases.values()]
     targets = _normalise_targets(targets)
     arrow_mm = arrow_length(everything)
+
+    single = len(drawn) == 1  # one group: the views side by side
+    fig = _panel_figure(
+        drawn,
+        views,
+        {k: i for i, k in enumerate(labels)},
+        markers=markers,
+        targets=targets,
+        arrow_mm=arrow_mm,
+        box=_bounding_box(everything, targets, arrow_mm),
+    )
+    if title:
+        fig.suptitle(title, fontsize=14)
+    show_markers = markers and any(d.markers is not None for d in everything)
+    has_loads = any(kind in ("weight", "force") for d in everything for kind, *_ in d.loads)
+    _legend(fig, labels, show_markers, targets, has_loads)
+    # Constrained layout does not see a 3D axes' z label: leave room for it explicitly.
+    fig.get_layout_engine().set(
+        rect=(0, 0.06 if single else 0.035, 1, 0.96), wspace=0.08 if "3d" in views else 0.02
+    )
+    if path is not None:
+        fig.savefig(os.fspath(path), dpi=110)
+    return fig
+
+
+def _bounding_box(everything: Sequence[Drawn], targets: Mapping, arrow_mm: float):
+    """``(lo, hi)`` (mm) around every body, load arrow and target, so that all panels share one
+    scale."""
     pts = [d.extent_points(arrow_mm) for d in everything]
     pts += [1e3 * np.atleast_2d(np.asarray(t, float)) for t in targets.values()]
     pts = np.concatenate(pts)
-    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    return pts.min(axis=0), pts.max(axis=0)
 
-    single = len(drawn) == 1  # one group: the views side by side
+
+def _panel_figure(drawn, views, order, *, markers, targets, arrow_mm, box) -> Figure:
+    """A figure of one panel per group x view, each case coloured by its place in ``order``;
+    titles: the groups over the columns and the views down the first, or, for one group, its
+    views side by side under their names."""
+    single = len(drawn) == 1
     n_cols, n_rows = (len(views), 1) if single else (len(drawn), len(views))
     fig = Figure(figsize=(4.4 * n_cols + 0.4, 4.2 * n_rows + 1.4), layout="constrained")
     FigureCanvasAgg(fig)
@@ -416,24 +474,13 @@ def plot_equilibrium_grid(
                     arrow_mm=arrow_mm,
                 )
             _draw_targets(ax, targets, view)
-            set_limits(ax, view, lo, hi)
+            set_limits(ax, view, *box)
             if single:
                 ax.set_title(_VIEW_TITLES[view], fontsize=11)
             elif row == 0:
                 ax.set_title(group, fontsize=12, fontweight="bold")
             elif col == 0:
                 ax.set_title(_VIEW_TITLES[view], fontsize=10, loc="left", color="0.3")
-    if title:
-        fig.suptitle(title, fontsize=14)
-    show_markers = markers and any(d.markers is not None for d in everything)
-    has_loads = any(kind in ("weight", "force") for d in everything for kind, *_ in d.loads)
-    _legend(fig, labels, show_markers, targets, has_loads)
-    # Constrained layout does not see a 3D axes' z label: leave room for it explicitly.
-    fig.get_layout_engine().set(
-        rect=(0, 0.06 if single else 0.035, 1, 0.96), wspace=0.08 if "3d" in views else 0.02
-    )
-    if path is not None:
-        fig.savefig(os.fspath(path), dpi=110)
     return fig
 
 
