@@ -112,86 +112,18 @@ class MocapDataset(eqx.Module):
         are not allowed, coordinates that look like millimetres, a marker never observed, or a
         frame in which no marker is observed.
         """
-        markers = np.asarray(markers, dtype=float) if markers is not None else None
-        if markers is None or markers.ndim != 3 or markers.shape[-1] != 3:
-            shape = None if markers is None else markers.shape
-            raise ValueError(f"markers must have shape (frames, m, 3), got {shape}")
+        markers = _markers_array(markers)
         n_frames, n_markers = markers.shape[:2]
-        if n_frames == 0:
-            raise ValueError("markers has no frames")
-        markers = _array("markers", markers, (n_frames, n_markers, 3), allow_nan=True)
         controls = np.asarray(controls, dtype=float)
         if controls.ndim == 1 and n_frames == 1:
             controls = controls[None]
         controls = _array("controls", controls, (n_frames, None))
-        if not isinstance(sites, (tuple, list)) or len(sites) != n_markers:
-            raise ValueError(
-                f"sites must list one (segment, s) per marker ({n_markers}), got "
-                f"{len(sites) if isinstance(sites, (tuple, list)) else sites!r}"
-            )
-        sites = tuple(check_site(f"sites[{j}]", x) for j, x in enumerate(sites))
-        # NaN is "missing": the whole frame's partial observation is kept and masked.
-        seen = np.isfinite(markers).all(-1)
-        partial = np.isfinite(markers).any(-1) & ~seen
-        if np.any(partial):
-            f, j = np.argwhere(partial)[0]
-            raise ValueError(
-                f"markers[{f}, {j}] is partly NaN ({markers[f, j]}): a missing marker must be NaN "
-                "in all three coordinates"
-            )
-        if not seen.any():
-            raise ValueError("markers: every marker position is NaN (nothing was observed)")
-        never = np.flatnonzero(~seen.any(0))
-        if never.size:
-            raise ValueError(
-                f"markers: marker(s) {never.tolist()} (sites {[sites[j][:2] for j in never]}) are "
-                "NaN in every frame; drop them from the dataset"
-            )
-        empty = np.flatnonzero(~seen.any(1))
-        if empty.size:
-            raise ValueError(
-                f"markers: frame(s) {empty[:10].tolist()} observe no marker at all; drop them"
-            )
-        biggest = np.nanmax(np.abs(markers))
-        if biggest > MAX_COORDINATE:
-            raise ValueError(
-                f"markers reach {biggest:.4g}: marker positions must be in metres (this looks "
-                "like millimetres; divide by 1000)"
-            )
-        if payload_mass is not None:
-            payload_mass = np.asarray(payload_mass, dtype=float)
-            if payload_mass.ndim == 0:
-                payload_mass = np.full(n_frames, float(payload_mass))
-            payload_mass = _array("payload_mass", payload_mass, (n_frames,))
-            if np.any(payload_mass < 0):
-                raise ValueError("payload_mass must be >= 0 (kg)")
-            if np.any(payload_mass > MAX_PAYLOAD):
-                raise ValueError(f"payload_mass exceeds {MAX_PAYLOAD:g}: it must be in kg (not g)")
-            payload_site = check_site("payload_site", payload_site)[:2] if payload_site else None
-        elif payload_site is not None:
-            raise ValueError("payload_site given without payload_mass")
-        if force is not None:
-            force = np.asarray(force, dtype=float)
-            if force.shape == (3,):
-                force = np.broadcast_to(force, (n_frames, 3)).copy()
-            force = _array("force", force, (n_frames, 3))
-            force_site = check_site("force_site", force_site)[:2] if force_site else None
-        elif force_site is not None:
-            raise ValueError("force_site given without force")
+        sites = _marker_sites(sites, n_markers)
+        _check_observed(markers, sites)
+        payload_mass, payload_site = _payload(payload_mass, payload_site, n_frames)
+        force, force_site = _force(force, force_site, n_frames)
         if orientations is not None:
-            orientations = _array(
-                "orientations", orientations, (n_frames, n_markers, 3, 3), allow_nan=True
-            )
-            flat = orientations.reshape(n_frames, n_markers, 9)
-            if np.any(np.isfinite(flat).any(-1) & ~np.isfinite(flat).all(-1)):
-                raise ValueError("orientations: a missing rotation must be NaN in all 9 entries")
-            ok = np.isfinite(flat).all(-1)
-            if not ok.any():
-                raise ValueError("orientations are NaN everywhere; pass orientations=None")
-            r = orientations[ok]
-            err = np.abs(np.einsum("kji,kjl->kil", r, r) - np.eye(3)).max()
-            if err > 1e-3 or np.any(np.linalg.det(r) < 0):
-                raise ValueError("orientations must be rotation matrices (R^T R = I, det 1)")
+            orientations = _orientations(orientations, n_frames, n_markers)
         if time is not None:
             time = _array("time", time, (n_frames,))
         return cls(
@@ -329,6 +261,106 @@ class MocapDataset(eqx.Module):
             time=time[last],
             **kwargs,
         )
+
+
+def _markers_array(markers) -> np.ndarray:
+    """``markers`` as a checked (frames, m, 3) float array (NaN allowed, at least one frame)."""
+    markers = np.asarray(markers, dtype=float) if markers is not None else None
+    if markers is None or markers.ndim != 3 or markers.shape[-1] != 3:
+        shape = None if markers is None else markers.shape
+        raise ValueError(f"markers must have shape (frames, m, 3), got {shape}")
+    n_frames, n_markers = markers.shape[:2]
+    if n_frames == 0:
+        raise ValueError("markers has no frames")
+    return _array("markers", markers, (n_frames, n_markers, 3), allow_nan=True)
+
+
+def _marker_sites(sites, n_markers: int) -> tuple:
+    """One checked ``(segment, s, offset)`` per marker."""
+    if not isinstance(sites, (tuple, list)) or len(sites) != n_markers:
+        raise ValueError(
+            f"sites must list one (segment, s) per marker ({n_markers}), got "
+            f"{len(sites) if isinstance(sites, (tuple, list)) else sites!r}"
+        )
+    return tuple(check_site(f"sites[{j}]", x) for j, x in enumerate(sites))
+
+
+def _check_observed(markers: np.ndarray, sites: tuple) -> None:
+    """Raise for a partly NaN marker, a marker or a frame never observed, or millimetres."""
+    # NaN is "missing": the whole frame's partial observation is kept and masked.
+    seen = np.isfinite(markers).all(-1)
+    partial = np.isfinite(markers).any(-1) & ~seen
+    if np.any(partial):
+        f, j = np.argwhere(partial)[0]
+        raise ValueError(
+            f"markers[{f}, {j}] is partly NaN ({markers[f, j]}): a missing marker must be NaN "
+            "in all three coordinates"
+        )
+    if not seen.any():
+        raise ValueError("markers: every marker position is NaN (nothing was observed)")
+    never = np.flatnonzero(~seen.any(0))
+    if never.size:
+        raise ValueError(
+            f"markers: marker(s) {never.tolist()} (sites {[sites[j][:2] for j in never]}) are "
+            "NaN in every frame; drop them from the dataset"
+        )
+    empty = np.flatnonzero(~seen.any(1))
+    if empty.size:
+        raise ValueError(
+            f"markers: frame(s) {empty[:10].tolist()} observe no marker at all; drop them"
+        )
+    biggest = np.nanmax(np.abs(markers))
+    if biggest > MAX_COORDINATE:
+        raise ValueError(
+            f"markers reach {biggest:.4g}: marker positions must be in metres (this looks "
+            "like millimetres; divide by 1000)"
+        )
+
+
+def _payload(payload_mass, payload_site, n_frames: int) -> tuple[np.ndarray | None, tuple | None]:
+    """The checked (frames,) payload masses (a scalar: the same in every frame) and site."""
+    if payload_mass is None:
+        if payload_site is not None:
+            raise ValueError("payload_site given without payload_mass")
+        return None, None
+    payload_mass = np.asarray(payload_mass, dtype=float)
+    if payload_mass.ndim == 0:
+        payload_mass = np.full(n_frames, float(payload_mass))
+    payload_mass = _array("payload_mass", payload_mass, (n_frames,))
+    if np.any(payload_mass < 0):
+        raise ValueError("payload_mass must be >= 0 (kg)")
+    if np.any(payload_mass > MAX_PAYLOAD):
+        raise ValueError(f"payload_mass exceeds {MAX_PAYLOAD:g}: it must be in kg (not g)")
+    return payload_mass, check_site("payload_site", payload_site)[:2] if payload_site else None
+
+
+def _force(force, force_site, n_frames: int) -> tuple[np.ndarray | None, tuple | None]:
+    """The checked (frames, 3) forces (one (3,) force: the same in every frame) and site."""
+    if force is None:
+        if force_site is not None:
+            raise ValueError("force_site given without force")
+        return None, None
+    force = np.asarray(force, dtype=float)
+    if force.shape == (3,):
+        force = np.broadcast_to(force, (n_frames, 3)).copy()
+    force = _array("force", force, (n_frames, 3))
+    return force, check_site("force_site", force_site)[:2] if force_site else None
+
+
+def _orientations(orientations, n_frames: int, n_markers: int) -> np.ndarray:
+    """The checked (frames, m, 3, 3) rotations, NaN (all 9 entries) where missing."""
+    orientations = _array("orientations", orientations, (n_frames, n_markers, 3, 3), allow_nan=True)
+    flat = orientations.reshape(n_frames, n_markers, 9)
+    if np.any(np.isfinite(flat).any(-1) & ~np.isfinite(flat).all(-1)):
+        raise ValueError("orientations: a missing rotation must be NaN in all 9 entries")
+    ok = np.isfinite(flat).all(-1)
+    if not ok.any():
+        raise ValueError("orientations are NaN everywhere; pass orientations=None")
+    r = orientations[ok]
+    err = np.abs(np.einsum("kji,kjl->kil", r, r) - np.eye(3)).max()
+    if err > 1e-3 or np.any(np.linalg.det(r) < 0):
+        raise ValueError("orientations must be rotation matrices (R^T R = I, det 1)")
+    return orientations
 
 
 def _mean_rotation(r: np.ndarray) -> np.ndarray:

@@ -83,6 +83,43 @@ def _check_variation(dataset: MocapDataset) -> None:
         )
 
 
+def _check_data(
+    scene: Scene, dataset: MocapDataset, validation: MocapDataset | None, holdout: float, seed: int
+) -> tuple[MocapDataset, MocapDataset | None]:
+    """The checked training and held-out frames (``holdout``: split off ``dataset``)."""
+    check_scene(scene)
+    _check(scene, dataset, "dataset")
+    if validation is not None and holdout:
+        raise ValueError("give either validation= or holdout=, not both")
+    if holdout:
+        dataset, validation = dataset.split(holdout, seed)
+    if validation is not None:
+        _check(scene, validation, "validation")
+        if validation.sites != dataset.sites:
+            raise ValueError("validation must have the same marker sites as dataset")
+    _check_variation(dataset)
+    return dataset, validation
+
+
+def _check_settings(loss, noise, orientation_noise, huber_delta, max_iterations, optimizer) -> None:
+    """Raise for a loss, a noise scale, an iteration limit or an optimiser ``identify`` lacks."""
+    if loss not in ("l2", "huber"):
+        raise ValueError(f"loss must be 'l2' or 'huber', got {loss!r}")
+    if not noise > 0 or not orientation_noise > 0 or not huber_delta > 0:
+        raise ValueError("noise, orientation_noise and huber_delta must be > 0")
+    if max_iterations < 0:
+        raise ValueError(f"max_iterations must be >= 0, got {max_iterations}")
+    lm = isinstance(optimizer, str)
+    if lm and optimizer != "levenberg-marquardt":
+        raise ValueError(
+            f"optimizer must be 'levenberg-marquardt' or an optax optimiser, got {optimizer!r}"
+        )
+    if not lm and not isinstance(optimizer, optax.GradientTransformation):
+        raise TypeError(
+            "optimizer must be 'levenberg-marquardt' or an optax.GradientTransformation"
+        )
+
+
 def identify(
     scene: Scene,
     dataset: MocapDataset,
@@ -143,54 +180,73 @@ def identify(
         offsets), and an :class:`IdentificationReport`.
     """
     t_start = time.perf_counter()
-    check_scene(scene)
-    _check(scene, dataset, "dataset")
-    if validation is not None and holdout:
-        raise ValueError("give either validation= or holdout=, not both")
-    if holdout:
-        dataset, validation = dataset.split(holdout, seed)
-    if validation is not None:
-        _check(scene, validation, "validation")
-        if validation.sites != dataset.sites:
-            raise ValueError("validation must have the same marker sites as dataset")
-    _check_variation(dataset)
-    if loss not in ("l2", "huber"):
-        raise ValueError(f"loss must be 'l2' or 'huber', got {loss!r}")
-    if not noise > 0 or not orientation_noise > 0 or not huber_delta > 0:
-        raise ValueError("noise, orientation_noise and huber_delta must be > 0")
-    if max_iterations < 0:
-        raise ValueError(f"max_iterations must be >= 0, got {max_iterations}")
-    lm = isinstance(optimizer, str)
-    if lm and optimizer != "levenberg-marquardt":
-        raise ValueError(
-            f"optimizer must be 'levenberg-marquardt' or an optax optimiser, got {optimizer!r}"
-        )
-    if not lm and not isinstance(optimizer, optax.GradientTransformation):
-        raise TypeError(
-            "optimizer must be 'levenberg-marquardt' or an optax.GradientTransformation"
-        )
+    dataset, validation = _check_data(scene, dataset, validation, holdout, seed)
+    _check_settings(loss, noise, orientation_noise, huber_delta, max_iterations, optimizer)
+    scales = (noise, orientation_noise, huber_delta if loss == "huber" else None)
+    fit = _build_problem(scene, dataset, validation, params, per_segment, mocap_transform, scales)
+    chunk, batch_options = _batch_settings(chunk_size, options)
+    if solver_options is not None:
+        _deprecated.warn("identify(solver_options=...)", "identify(options=SolverOptions(...))")
+        batch_options.update(solver_options)
+    train = fit.evaluator(dataset, chunk, batch_options)
+    theta = np.zeros(fit.problem.n_theta)
+    align = "mocap_transform" in params and mocap_transform is None
+    fit, current, first_eval_s = _start(fit, train, theta, align)
+    theta, current, history, stop = _optimise(
+        fit, train, theta, current, optimizer, max_iterations, tol, progress
+    )
+    return _report(fit, train, theta, current, history, stop, t_start, first_eval_s)
 
-    fitting_transform = "mocap_transform" in params
+
+# ------------------------------------------------------------------------------ the problem
+@dataclasses.dataclass(frozen=True)
+class _Fit:
+    """The set-up of one fit: the checked frames and the problem on them."""
+
+    scene: Scene  # the user's scene, with zero stiffening laws where they are fitted
+    dataset: MocapDataset
+    validation: MocapDataset | None
+    problem: Problem
+    labels: list  # per block: the labels of its reported values
+    # The starting mocap transform (given, identity, or aligned at the start), kept as numpy:
+    # the report's initial values.
+    rotation0: np.ndarray
+    translation0: np.ndarray
+    noise: float
+
+    @property
+    def orient(self) -> bool:
+        """The training frames carry orientations (the residuals have orientation terms)."""
+        return self.dataset.orientations is not None
+
+    @property
+    def n_observations(self) -> int:
+        """Observed marker coordinates and orientation components of the training frames."""
+        d = self.dataset
+        n = d.observed.sum() * 3
+        if self.orient:
+            n = n + np.isfinite(d.orientations.reshape(d.n_frames, -1, 9)).all(-1).sum() * 3
+        return int(n)
+
+    def evaluator(self, data: MocapDataset, chunk: int, options: dict) -> Evaluator:
+        """Warm-started batch evaluation of the frames of ``data`` (padded to whole chunks)."""
+        frames = FrameData.build(data, self.problem.frame_loads, chunk, self.orient)
+        return Evaluator(self.problem, frames, chunk, options)
+
+
+def _build_problem(
+    scene: Scene, dataset, validation, params, per_segment, mocap_transform, scales
+) -> _Fit:
+    """The parameter blocks, frame loads, starting transform and residual scales ``(noise,
+    orientation_noise, huber_delta or None for the quadratic loss)`` of a fit on ``dataset``;
+    raises where ``validation`` carries other kinds of data."""
     fit_scene, blocks, initial, labels = make_blocks(scene, params, per_segment, dataset.n_markers)
     loaded, frame_loads = with_frame_loads(fit_scene, dataset)
     if validation is not None:
-        with_frame_loads(fit_scene, validation)  # same checks
-        if (validation.payload_mass is None) != (dataset.payload_mass is None) or (
-            validation.force is None
-        ) != (dataset.force is None):
-            raise ValueError("validation must carry the same kinds of loads as dataset")
+        _check_validation_kinds(fit_scene, dataset, validation)
+    rot0, trans0 = _starting_transform(mocap_transform)
+    noise, orientation_noise, huber_delta = scales
     sites = dataset.sites
-    orient = dataset.orientations is not None
-    if validation is not None and orient and validation.orientations is None:
-        raise ValueError("dataset has orientations but validation does not")
-    if mocap_transform is not None:
-        rot0, trans0 = (np.asarray(x, float) for x in mocap_transform)
-        if rot0.shape != (3, 3) or trans0.shape != (3,):
-            raise ValueError("mocap_transform must be (rotation (3, 3), translation (3,))")
-        if not np.allclose(rot0.T @ rot0, np.eye(3), atol=1e-6) or np.linalg.det(rot0) < 0:
-            raise ValueError("mocap_transform rotation must be a proper rotation matrix")
-    else:
-        rot0, trans0 = np.eye(3), np.zeros(3)
     offsets0 = np.asarray([x[2] for x in sites], float)
     problem = Problem(
         scene=loaded,
@@ -207,135 +263,186 @@ def identify(
         offsets=jnp.asarray(offsets0),
         noise=jnp.asarray(float(noise)),
         orientation_noise=jnp.asarray(float(orientation_noise)),
-        huber_delta=jnp.asarray(float(huber_delta) if loss == "huber" else L2_DELTA),
+        huber_delta=jnp.asarray(L2_DELTA if huber_delta is None else float(huber_delta)),
     )
+    return _Fit(fit_scene, dataset, validation, problem, labels, rot0, trans0, float(noise))
+
+
+def _check_validation_kinds(fit_scene: Scene, dataset, validation) -> None:
+    """Raise unless ``validation`` carries the loads and orientations ``dataset`` does."""
+    with_frame_loads(fit_scene, validation)  # same checks
+    if (validation.payload_mass is None) != (dataset.payload_mass is None) or (
+        validation.force is None
+    ) != (dataset.force is None):
+        raise ValueError("validation must carry the same kinds of loads as dataset")
+    if dataset.orientations is not None and validation.orientations is None:
+        raise ValueError("dataset has orientations but validation does not")
+
+
+def _starting_transform(mocap_transform) -> tuple[np.ndarray, np.ndarray]:
+    """The checked ``(rotation, translation)`` given, or the identity."""
+    if mocap_transform is None:
+        return np.eye(3), np.zeros(3)
+    rot0, trans0 = (np.asarray(x, float) for x in mocap_transform)
+    if rot0.shape != (3, 3) or trans0.shape != (3,):
+        raise ValueError("mocap_transform must be (rotation (3, 3), translation (3,))")
+    if not np.allclose(rot0.T @ rot0, np.eye(3), atol=1e-6) or np.linalg.det(rot0) < 0:
+        raise ValueError("mocap_transform rotation must be a proper rotation matrix")
+    return rot0, trans0
+
+
+def _batch_settings(chunk_size, options: SolverOptions | None) -> tuple[int, dict]:
+    """Frames per compiled batch, and the keyword arguments of the frames' solve_batch."""
     chunk = int(chunk_size)
     if chunk < 1:
         raise ValueError(f"chunk_size must be >= 1, got {chunk_size}")
     # A frame that fails at a trial point rejects the step; the diffrax fallback (a long
     # compilation) is only used when asked for.
-    options = {"fallback": False, "options": resolve_options(options)}
-    if solver_options is not None:
-        _deprecated.warn("identify(solver_options=...)", "identify(options=SolverOptions(...))")
-        options.update(solver_options)
-    train = Evaluator(problem, FrameData.build(dataset, frame_loads, chunk, orient), chunk, options)
-    theta = np.zeros(problem.n_theta)
+    return chunk, {"fallback": False, "options": resolve_options(options)}
 
+
+# ------------------------------------------------------------------------------ the fit
+def _start(fit: _Fit, train: Evaluator, theta, align: bool):
+    """The first evaluation, at the starting values ``theta``. With ``align``, the starting
+    mocap transform becomes the rigid alignment (Kabsch) of the starting model's markers to the
+    data, and the frames are evaluated again. Returns ``(fit, evaluation, first evaluation's
+    time in s)``."""
     t0 = time.perf_counter()
     current = train(theta)
     first_eval_s = time.perf_counter() - t0
-    if not current.valid[: dataset.n_frames].any():
+    if not current.valid[: fit.dataset.n_frames].any():
         raise ValueError("no training frame converged to a stable equilibrium at the start values")
-    if fitting_transform and mocap_transform is None:
-        world = (current.pred - trans0) @ rot0  # predictions in the world frame
-        rot0, trans0 = kabsch(world, dataset.markers)
+    if align:
+        world = (current.pred - fit.translation0) @ fit.rotation0  # predictions, world frame
+        rot0, trans0 = kabsch(world, fit.dataset.markers)
         problem = dataclasses.replace(
-            problem, rotation0=jnp.asarray(rot0), translation0=jnp.asarray(trans0)
+            fit.problem, rotation0=jnp.asarray(rot0), translation0=jnp.asarray(trans0)
         )
+        fit = dataclasses.replace(fit, problem=problem, rotation0=rot0, translation0=trans0)
         train.problem = problem
         current = train(theta, q0=current.q)
+    return fit, current, first_eval_s
 
-    n_obs = int(
-        dataset.observed.sum() * 3
-        + (
-            0
-            if not orient
-            else np.isfinite(dataset.orientations.reshape(dataset.n_frames, -1, 9)).all(-1).sum()
-            * 3
+
+def _optimise(fit: _Fit, train, theta, current, optimizer, max_iterations, tol, progress):
+    """Levenberg-Marquardt (or optax) iterations from ``theta``; each trial point's equilibria
+    are warm-started from the current ones. Returns the optimum, its evaluation, the loss and
+    RMSE histories and ``(iterations, result, message)``."""
+    history = _History(current, fit.n_observations, fit.dataset.markers, max_iterations, progress)
+    if isinstance(optimizer, str):
+        theta, current, stop = _levenberg_marquardt(
+            train, theta, current, max_iterations, tol, history
         )
-    )
-    theta, current, history, (iterations, result, message) = _optimise(
-        train, theta, current, optimizer, max_iterations, tol, progress, n_obs, dataset.markers
-    )
-    losses, rmse = history
+    else:
+        theta, current, stop = _optax_descent(
+            train, theta, current, optimizer, max_iterations, tol, history
+        )
+    history.bar.close()
+    return theta, current, (history.losses, history.rmse), stop
 
-    # Laplace / Gauss-Newton covariance at the optimum.
-    r = current.r[current.valid].reshape(-1)
-    jac = current.j[current.valid].reshape(r.size, -1)
-    dof = max(n_obs - problem.n_theta, 1)
-    s2 = float(r @ r) / dof
-    cov = s2 * np.linalg.pinv(jac.T @ jac)
-    std_theta = np.sqrt(np.maximum(np.diag(cov), 0.0))
 
-    _, rot, trans, offsets = problem.apply(jnp.asarray(theta))
-    parameters, names, identifiable = {}, [], []
-    k = 0
-    for block, init, label, th in zip(
-        blocks, problem.initial, labels, problem.split(theta), strict=True
-    ):
-        sd = std_theta[k : k + block.size]
-        k += block.size
-        kind, unit, positive = PARAMETERS[block.name]
-        if block.name == "mocap_transform":
-            value = np.concatenate([np.asarray(th[:3]), np.asarray(trans)])
-            start = np.concatenate([np.zeros(3), trans0])
-            std = sd
-        else:
-            value = np.asarray(problem.physical(block, init, jnp.asarray(th)), float).reshape(-1)
-            start = np.asarray(init, float).reshape(-1)
-            scale = value if block.log else np.full(value.shape, STEP_SCALE.get(block.name, 1.0))
-            std = np.abs(scale) * (sd if block.size == value.size else sd[0])
-        if len(label) == 1 and value.size > 1:  # one shared factor on equal values
-            value, start, std = value[:1], start[:1], std[:1]
-        rel = [float(s / abs(v)) if v != 0 else None for s, v in zip(std, value, strict=True)]
-        parameters[block.name] = {
-            "unit": unit,
-            "labels": list(label),
-            "initial": [float(v) for v in start],
-            "value": [float(v) for v in value],
-            "std": [float(v) if np.isfinite(v) else None for v in std],
-            "relative_std": rel,
-        }
-        if block.size == len(label):
-            names += [f"{block.name}{x}" for x in label]
-        else:
-            names += (
-                [block.name]
-                if block.size == 1
-                else [f"{block.name}[{i}]" for i in range(block.size)]
+class _History:
+    """Loss and training RMSE after every accepted iteration, and the progress bar."""
+
+    def __init__(self, current, n_obs: int, markers, max_iterations: int, progress):
+        from tqdm.auto import tqdm
+
+        self.n_obs, self.markers = n_obs, markers
+        self.losses = [current.cost() / n_obs]
+        self.rmse = [_rmse_mm(current.pred, markers)]
+        self.bar = tqdm(
+            total=max_iterations,
+            desc="identify",
+            unit="it",
+            disable=None if progress is None else not progress,
+            leave=False,
+        )
+
+    def accept(self, current) -> None:
+        """Record the evaluation of an accepted step."""
+        self.losses.append(current.cost() / self.n_obs)
+        self.rmse.append(_rmse_mm(current.pred, self.markers))
+        self.bar.update()
+        self.bar.set_postfix_str(f"RMSE {self.rmse[-1]:.3f} mm")
+
+
+def _levenberg_marquardt(train, theta, current, max_iterations, tol, history: _History):
+    """The Levenberg-Marquardt loop; returns ``(theta, evaluation, (iterations, result,
+    message))``."""
+    result, message = RESULTS.max_steps_reached, "iteration limit reached"
+    iterations = 0
+    lm = _LevenbergMarquardt()
+    while iterations < max_iterations:
+        r, jac = current.stacked()
+        step, predicted = lm.step(jac, r)
+        if predicted <= tol * current.cost():
+            result, message = RESULTS.successful, "converged (no decrease left to gain)"
+            break
+        trial = train(theta + step, q0=current.q)
+        ok = bool(np.all(trial.valid[current.valid]))
+        actual = current.cost() - trial.cost(current.valid) if ok else -np.inf
+        if lm.update(actual / predicted, np.max(np.abs(step)), ok):
+            decrease = actual / max(current.cost(), 1e-300)
+            theta, current = theta + step, trial
+            iterations += 1
+            history.accept(current)
+            if np.max(np.abs(step)) < np.sqrt(tol) or decrease < tol:
+                result, message = (
+                    RESULTS.successful,
+                    "converged (step or loss change below tolerance)",
+                )
+                break
+        elif lm.rejected >= _LevenbergMarquardt.MAX_REJECTED:
+            result = RESULTS.successful if ok else RESULTS.no_equilibrium
+            message = (
+                "converged (no step reduces the loss further: at the solver's accuracy)"
+                if ok
+                else "stopped: equilibria fail to converge along every trial step"
             )
-        # A log-coordinate with a standard deviation above 1 is not pinned down by the data.
-        identifiable += [bool(s < 1.0) if block.log else True for s in sd]
+            break
+    return theta, current, (iterations, result, message)
 
-    tip = int(np.argmax([seg + s for seg, s, _ in sites]))
-    errors_train = FitErrors.compute(
-        current.pred,
-        dataset.markers,
-        tip,
-        current.valid[: dataset.n_frames],
-        current.q[: dataset.n_frames],
-        current.rpred if orient else None,
-        dataset.orientations,
-    )
+
+def _optax_descent(train, theta, current, optimizer, max_iterations, tol, history: _History):
+    """An optax optimiser driven with the gradient ``J^T r``; returns ``(theta, evaluation,
+    (iterations, result, message))``."""
+    result, message = RESULTS.max_steps_reached, "iteration limit reached"
+    iterations = 0
+    state = optimizer.init(theta)
+    while iterations < max_iterations:
+        r, jac = current.stacked()
+        updates, state = optimizer.update(jac.T @ r, state, theta)
+        new_theta = np.asarray(optax.apply_updates(theta, updates))
+        trial = train(new_theta, q0=current.q)
+        if not np.all(trial.valid[current.valid]):
+            result = RESULTS.no_equilibrium
+            message = "stopped: a frame failed to converge along the optax path"
+            break
+        previous = current.cost()
+        theta, current = new_theta, trial
+        iterations += 1
+        history.accept(current)
+        if abs(previous - current.cost()) < tol * max(previous, 1e-300):
+            result, message = RESULTS.successful, "converged (loss change below tolerance)"
+            break
+    return theta, current, (iterations, result, message)
+
+
+# ------------------------------------------------------------------------------ the report
+def _report(fit: _Fit, train, theta, current, history, stop, t_start, first_eval_s):
+    """The fitted scene and the :class:`IdentificationReport` of the optimum ``theta``."""
+    problem = fit.problem
+    cov, std_theta = _covariance(current, fit.n_observations, problem.n_theta)
+    fitted, rot, trans, offsets = problem.apply(jnp.asarray(theta))
+    parameters, names, identifiable = _parameter_table(fit, theta, std_theta, trans)
+    tip = int(np.argmax([seg + s for seg, s, _ in fit.dataset.sites]))
+    errors_train = _fit_errors(current, fit.dataset, tip, fit.orient)
     errors_val = None
-    if validation is not None:
-        held = Evaluator(
-            problem, FrameData.build(validation, frame_loads, chunk, orient), chunk, options
-        )
-        ev = held(theta)
-        errors_val = FitErrors.compute(
-            ev.pred,
-            validation.markers,
-            tip,
-            ev.valid[: validation.n_frames],
-            ev.q[: validation.n_frames],
-            ev.rpred if orient else None,
-            validation.orientations,
-        )
-    # The fitted scene: the user's structure (no per-frame loads), fitted marker offsets.
-    out_scene = problem.apply(jnp.asarray(theta))[0]
-    out_scene = Scene(
-        out_scene.robot,
-        out_scene.model,
-        tendons=out_scene.tendons,
-        loads=fit_scene.loads,
-        markers=tuple(
-            (seg, s, tuple(float(v) for v in off))
-            for (seg, s, _), off in zip(sites, np.asarray(offsets), strict=True)
-        ),
-        quadrature_points=fit_scene.quadrature_points,
-        rotation_substeps=fit_scene.rotation_substeps,
-    )
+    if fit.validation is not None:
+        held = fit.evaluator(fit.validation, train.chunk, train.options)
+        errors_val = _fit_errors(held(theta), fit.validation, tip, fit.orient)
+    out_scene = _fitted_scene(fitted, fit.scene, fit.dataset.sites, offsets)
+    (losses, rmse), (iterations, result, message) = history, stop
     report = IdentificationReport(
         parameters=parameters,
         loss_history=losses,
@@ -353,87 +460,100 @@ def identify(
         identifiable=identifiable,
         time_s=time.perf_counter() - t_start,
         first_evaluation_s=first_eval_s,
-        noise=float(noise),
+        noise=fit.noise,
     )
     return out_scene, report
 
 
-def _optimise(train, theta, current, optimizer, max_iterations, tol, progress, n_obs, markers):
-    """Levenberg-Marquardt (or optax) iterations from ``theta``; each trial point's equilibria
-    are warm-started from the current ones. Returns the optimum, its evaluation, the loss and
-    RMSE histories and ``(iterations, result, message)``."""
-    from tqdm.auto import tqdm
+def _covariance(current, n_obs: int, n_theta: int) -> tuple[np.ndarray, np.ndarray]:
+    """Laplace / Gauss-Newton covariance ``s^2 (J^T J)^-1`` of the internal coordinates at the
+    optimum, and their standard deviations."""
+    r, jac = current.stacked()
+    dof = max(n_obs - n_theta, 1)
+    s2 = float(r @ r) / dof
+    cov = s2 * np.linalg.pinv(jac.T @ jac)
+    return cov, np.sqrt(np.maximum(np.diag(cov), 0.0))
 
-    losses = [current.cost() / n_obs]
-    rmse = [_rmse_mm(current.pred, markers)]
-    bar = tqdm(
-        total=max_iterations,
-        desc="identify",
-        unit="it",
-        disable=None if progress is None else not progress,
-        leave=False,
+
+def _parameter_table(fit: _Fit, theta, std_theta, trans) -> tuple[dict, list, list]:
+    """The report's entry of every block, the coordinate names and which are identifiable."""
+    problem = fit.problem
+    parameters, names, identifiable = {}, [], []
+    k = 0
+    for block, init, label, th in zip(
+        problem.blocks, problem.initial, fit.labels, problem.split(theta), strict=True
+    ):
+        sd = std_theta[k : k + block.size]
+        k += block.size
+        value, start, std = _block_estimate(fit, block, init, th, sd, trans)
+        if len(label) == 1 and value.size > 1:  # one shared factor on equal values
+            value, start, std = value[:1], start[:1], std[:1]
+        parameters[block.name] = _parameter_entry(block, label, start, value, std)
+        names += _coordinate_names(block, label)
+        # A log-coordinate with a standard deviation above 1 is not pinned down by the data.
+        identifiable += [bool(s < 1.0) if block.log else True for s in sd]
+    return parameters, names, identifiable
+
+
+def _block_estimate(fit: _Fit, block, init, th, sd, trans):
+    """A block's fitted and starting values and their standard deviations (physical units),
+    from its internal coordinates ``th`` and their standard deviations ``sd``."""
+    if block.name == "mocap_transform":
+        value = np.concatenate([np.asarray(th[:3]), np.asarray(trans)])
+        start = np.concatenate([np.zeros(3), fit.translation0])
+        return value, start, sd
+    value = np.asarray(fit.problem.physical(block, init, jnp.asarray(th)), float).reshape(-1)
+    start = np.asarray(init, float).reshape(-1)
+    scale = value if block.log else np.full(value.shape, STEP_SCALE.get(block.name, 1.0))
+    return value, start, np.abs(scale) * (sd if block.size == value.size else sd[0])
+
+
+def _parameter_entry(block, label, start, value, std) -> dict:
+    rel = [float(s / abs(v)) if v != 0 else None for s, v in zip(std, value, strict=True)]
+    return {
+        "unit": PARAMETERS[block.name][1],
+        "labels": list(label),
+        "initial": [float(v) for v in start],
+        "value": [float(v) for v in value],
+        "std": [float(v) if np.isfinite(v) else None for v in std],
+        "relative_std": rel,
+    }
+
+
+def _coordinate_names(block, label) -> list[str]:
+    """Names of a block's internal coordinates."""
+    if block.size == len(label):
+        return [f"{block.name}{x}" for x in label]
+    return [block.name] if block.size == 1 else [f"{block.name}[{i}]" for i in range(block.size)]
+
+
+def _fit_errors(evaluation, data: MocapDataset, tip: int, orient: bool) -> FitErrors:
+    n = data.n_frames
+    return FitErrors.compute(
+        evaluation.pred,
+        data.markers,
+        tip,
+        evaluation.valid[:n],
+        evaluation.q[:n],
+        evaluation.rpred if orient else None,
+        data.orientations,
     )
-    result, message = RESULTS.max_steps_reached, "iteration limit reached"
-    iterations = 0
-    if isinstance(optimizer, str):
-        lm = _LevenbergMarquardt()
-        while iterations < max_iterations:
-            r = current.r[current.valid].reshape(-1)
-            jac = current.j[current.valid].reshape(r.size, -1)
-            step, predicted = lm.step(jac, r)
-            if predicted <= tol * current.cost():
-                result, message = RESULTS.successful, "converged (no decrease left to gain)"
-                break
-            trial = train(theta + step, q0=current.q)
-            ok = bool(np.all(trial.valid[current.valid]))
-            actual = current.cost() - trial.cost(current.valid) if ok else -np.inf
-            if lm.update(actual / predicted, np.max(np.abs(step)), ok):
-                decrease = actual / max(current.cost(), 1e-300)
-                theta, current = theta + step, trial
-                iterations += 1
-                losses.append(current.cost() / n_obs)
-                rmse.append(_rmse_mm(current.pred, markers))
-                bar.update()
-                bar.set_postfix_str(f"RMSE {rmse[-1]:.3f} mm")
-                if np.max(np.abs(step)) < np.sqrt(tol) or decrease < tol:
-                    result, message = (
-                        RESULTS.successful,
-                        "converged (step or loss change below tolerance)",
-                    )
-                    break
-            elif lm.rejected >= _LevenbergMarquardt.MAX_REJECTED:
-                result = RESULTS.successful if ok else RESULTS.no_equilibrium
-                message = (
-                    "converged (no step reduces the loss further: at the solver's accuracy)"
-                    if ok
-                    else "stopped: equilibria fail to converge along every trial step"
-                )
-                break
-    else:
-        state = optimizer.init(theta)
-        while iterations < max_iterations:
-            r = current.r[current.valid].reshape(-1)
-            grad = current.j[current.valid].reshape(r.size, -1).T @ r
-            updates, state = optimizer.update(grad, state, theta)
-            new_theta = np.asarray(optax.apply_updates(theta, updates))
-            trial = train(new_theta, q0=current.q)
-            if not np.all(trial.valid[current.valid]):
-                result = RESULTS.no_equilibrium
-                message = "stopped: a frame failed to converge along the optax path"
-                break
-            previous = current.cost()
-            theta, current = new_theta, trial
-            iterations += 1
-            losses.append(current.cost() / n_obs)
-            rmse.append(_rmse_mm(current.pred, markers))
-            bar.update()
-            bar.set_postfix_str(f"RMSE {rmse[-1]:.3f} mm")
-            if abs(previous - current.cost()) < tol * max(previous, 1e-300):
-                result, message = RESULTS.successful, "converged (loss change below tolerance)"
-                break
-    bar.close()
 
-    return theta, current, (losses, rmse), (iterations, result, message)
+
+def _fitted_scene(fitted: Scene, fit_scene: Scene, sites, offsets) -> Scene:
+    """The fitted scene: the user's structure (no per-frame loads), fitted marker offsets."""
+    return Scene(
+        fitted.robot,
+        fitted.model,
+        tendons=fitted.tendons,
+        loads=fit_scene.loads,
+        markers=tuple(
+            (seg, s, tuple(float(v) for v in off))
+            for (seg, s, _), off in zip(sites, np.asarray(offsets), strict=True)
+        ),
+        quadrature_points=fit_scene.quadrature_points,
+        rotation_substeps=fit_scene.rotation_substeps,
+    )
 
 
 class _LevenbergMarquardt:

@@ -184,6 +184,21 @@ def _evaluate(problem, theta, q, controls, rows, meas, mask, rmeas, rmask):
 # ------------------------------------------------------------------------------ set-up
 def make_blocks(scene: Scene, params, per_segment, n_markers) -> tuple[Scene, list, list, list]:
     """Blocks, starting values and labels; adds zero stiffening laws where they are fitted."""
+    params = _check_params(params, per_segment)
+    if "stiffening" in params:
+        scene = _with_stiffening_laws(scene)
+    blocks, initial, labels = [], [], []
+    for name in params:
+        block, values, label = _block(scene, name, name in per_segment, n_markers)
+        blocks.append(block)
+        initial.append(None if values is None else np.asarray(values, float))
+        labels.append(label)
+    return scene, blocks, initial, labels
+
+
+def _check_params(params, per_segment) -> tuple:
+    """``params`` as a tuple of known, distinct names; ``per_segment`` a subset of them that
+    are segment or tendon parameters."""
     if isinstance(params, str):
         params = (params,)
     params = tuple(params)
@@ -199,69 +214,72 @@ def make_blocks(scene: Scene, params, per_segment, n_markers) -> tuple[Scene, li
             raise ValueError(f"per_segment names {name!r}, which is not in params")
         if PARAMETERS[name][0] not in ("segment", "tendon"):
             raise ValueError(f"per_segment applies to segment and tendon parameters, not {name!r}")
-    if "stiffening" in params:
-        segments = [
-            seg
-            if seg.stiffening is not None
-            else dataclasses.replace(seg, stiffening=ExponentialStiffening(0.0))
-            for seg in scene.robot.segments
-        ]
-        if not all(isinstance(seg.stiffening, ExponentialStiffening) for seg in segments):
-            raise ValueError("stiffening can be fitted for ExponentialStiffening laws only")
-        scene = eqx.tree_at(lambda s: s.robot.segments, scene, tuple(segments))
-    blocks, initial, labels = [], [], []
-    for name in params:
-        kind, unit, positive = PARAMETERS[name]
-        per = name in per_segment
-        if kind == "segment":
-            idx = tuple(range(scene.n_segments))
-            if name == "stiffening":
-                values = [float(seg.stiffening.rate) for seg in scene.robot.segments]
-            else:
-                values = [float(getattr(seg, name)) for seg in scene.robot.segments]
-            label = [f"[{i}]" for i in idx]
-        elif kind == "tendon":
-            idx = tuple(
-                i
-                for i, t in enumerate(scene.tendons)
-                if name != "tendon_gain" or t.mode == "length"
-            )
-            if not idx:
-                raise ValueError(
-                    f"{name}: the scene has no "
-                    + (
-                        "length-mode tendon (tension-mode tendons have no gain)"
-                        if scene.tendons and name == "tendon_gain"
-                        else "tendon"
-                    )
-                )
-            attr = "gain" if name == "tendon_gain" else "offset"
-            values = [float(getattr(scene.tendons[i], attr)) for i in idx]
-            label = [f"[{i}]" for i in idx]
-        elif kind == "transform":
-            idx, values = (), [0.0] * 6
-            label = ["[rx]", "[ry]", "[rz]", "[tx]", "[ty]", "[tz]"]
-        else:
-            idx, values = tuple(range(n_markers)), None
-            label = [f"[{j}].{a}" for j in range(n_markers) for a in "xyz"]
-        if positive and any(v <= 0 for v in values):
-            raise ValueError(
-                f"{name}: the starting value must be > 0 to fit it (log scale), got {values}"
-            )
-        if kind in ("segment", "tendon"):
-            size = len(idx) if per else 1
-        elif kind == "transform":
-            size = 6
-        else:
-            size = 3 * n_markers
-        blocks.append(Block(name, size, idx, positive))
-        initial.append(None if values is None else np.asarray(values, float))
-        labels.append(
-            label
-            if (per or kind not in ("segment", "tendon"))
-            else ([""] if len(set(values)) == 1 else label)
+    return params
+
+
+def _with_stiffening_laws(scene: Scene) -> Scene:
+    """``scene`` with a zero-rate exponential stiffening law on every segment without one."""
+    segments = [
+        seg
+        if seg.stiffening is not None
+        else dataclasses.replace(seg, stiffening=ExponentialStiffening(0.0))
+        for seg in scene.robot.segments
+    ]
+    if not all(isinstance(seg.stiffening, ExponentialStiffening) for seg in segments):
+        raise ValueError("stiffening can be fitted for ExponentialStiffening laws only")
+    return eqx.tree_at(lambda s: s.robot.segments, scene, tuple(segments))
+
+
+def _block(scene: Scene, name: str, per: bool, n_markers: int) -> tuple[Block, list | None, list]:
+    """The block of parameter ``name`` (one value per segment / tendon with ``per``), its
+    starting values (None for marker offsets) and the labels of its reported values."""
+    kind, unit, positive = PARAMETERS[name]
+    idx, values, label = _targets(scene, name, kind, n_markers)
+    if positive and any(v <= 0 for v in values):
+        raise ValueError(
+            f"{name}: the starting value must be > 0 to fit it (log scale), got {values}"
         )
-    return scene, blocks, initial, labels
+    if kind in ("segment", "tendon"):
+        size = len(idx) if per else 1
+    elif kind == "transform":
+        size = 6
+    else:
+        size = 3 * n_markers
+    if not per and kind in ("segment", "tendon") and len(set(values)) == 1:
+        label = [""]  # one shared factor on equal values: reported as one value
+    return Block(name, size, idx, positive), values, label
+
+
+def _targets(scene: Scene, name: str, kind: str, n_markers: int) -> tuple[tuple, list | None, list]:
+    """The segments / tendons / markers parameter ``name`` writes, their starting values and
+    labels."""
+    if kind == "segment":
+        idx = tuple(range(scene.n_segments))
+        if name == "stiffening":
+            values = [float(seg.stiffening.rate) for seg in scene.robot.segments]
+        else:
+            values = [float(getattr(seg, name)) for seg in scene.robot.segments]
+        return idx, values, [f"[{i}]" for i in idx]
+    if kind == "tendon":
+        idx = tuple(
+            i for i, t in enumerate(scene.tendons) if name != "tendon_gain" or t.mode == "length"
+        )
+        if not idx:
+            raise ValueError(
+                f"{name}: the scene has no "
+                + (
+                    "length-mode tendon (tension-mode tendons have no gain)"
+                    if scene.tendons and name == "tendon_gain"
+                    else "tendon"
+                )
+            )
+        attr = "gain" if name == "tendon_gain" else "offset"
+        values = [float(getattr(scene.tendons[i], attr)) for i in idx]
+        return idx, values, [f"[{i}]" for i in idx]
+    if kind == "transform":
+        return (), [0.0] * 6, ["[rx]", "[ry]", "[rz]", "[tx]", "[ty]", "[tz]"]
+    idx = tuple(range(n_markers))
+    return idx, None, [f"[{j}].{a}" for j in range(n_markers) for a in "xyz"]
 
 
 def kabsch(world: np.ndarray, measured: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -385,3 +403,8 @@ class Evaluation:
     def cost(self, valid=None) -> float:
         v = self.valid if valid is None else valid
         return 0.5 * float(np.sum(self.r[v] ** 2))
+
+    def stacked(self) -> tuple[np.ndarray, np.ndarray]:
+        """Residuals (k,) and Jacobian (k, p) of the valid frames, stacked."""
+        r = self.r[self.valid].reshape(-1)
+        return r, self.j[self.valid].reshape(r.size, -1)

@@ -64,61 +64,68 @@ def high_fidelity(
         law = seg.stiffening
         if law is None and stiffening_rate is not None:
             law = ExponentialStiffening(stiffening_rate)
-        for j in range(n):
-            tapered = seg.radius_tip is not None
-            segments.append(
-                Segment(
-                    length=seg.length / n,
-                    bending_stiffness=seg.bending_stiffness
-                    * (seg.section_scale(np.asarray(j / n)) ** 4 if tapered else 1.0),
-                    axial_stiffness=seg.axial_stiffness * n,
-                    torsion_stiffness=seg.torsion_stiffness
-                    * (seg.section_scale(np.asarray(j / n)) ** 4 if tapered else 1.0),
-                    linear_density=seg.linear_density
-                    * (seg.section_scale(np.asarray(j / n)) ** 2 if tapered else 1.0),
-                    radius=seg.radius_at(np.asarray(j / n)),
-                    radius_tip=seg.radius_at(np.asarray((j + 1) / n)) if tapered else None,
-                    stiffening=law,
-                    contraction_limit=seg.contraction_limit / n,
-                )
-            )
+        segments += [_segment_piece(seg, j, n, law) for j in range(n)]
     robot = Robot(segments, scene.robot.base_rotation, scene.robot.base_position)
-    tendons = []
-    for t in scene.tendons:
-        seg, s = _piece(t.segment, t.s, n, anchor=True)
-        guides = sorted(
-            {round(g * n - j, 12) for g in t.guides for j in range(n) if j <= g * n <= j + 1}
-        )
-        tendons.append(
-            Tendon(
-                seg,
-                t.angle,
-                t.offset,
-                s=s,
-                offset_end=t.offset_end,
-                bowden=t.bowden,
-                guides=guides,
-                mode=t.mode,
-                gain=t.gain,
-            )
-        )
-    loads = []
-    for load in scene.loads:
-        if isinstance(load, Gravity):
-            loads.append(load)
-            continue
-        seg, s = _piece(load.segment, float(load.s), n)
-        if isinstance(load, PointMass):
-            loads.append(PointMass(load.mass, seg, s))
-        elif isinstance(load, PointForce):
-            loads.append(PointForce(load.force, seg, s, follower=load.follower))
-        elif isinstance(load, PointMoment):
-            loads.append(PointMoment(load.moment, seg, s, follower=load.follower))
+    tendons = [_tendon_on_pieces(t, n) for t in scene.tendons]
+    loads = [x for x in (_load_on_pieces(load, n) for load in scene.loads) if x is not None]
     markers = [(*_piece(seg, s, n), off) for seg, s, off in scene.markers]
     quad = max(scene.quadrature_points, model.strain_degree() + 3)
     return Scene(
         robot, model, tendons=tendons, loads=loads, markers=markers, quadrature_points=quad
     )
+
+
+def _segment_piece(seg: Segment, j: int, n: int, law) -> Segment:
+    """Piece ``j`` of ``n`` of a segment, with the stiffening law ``law``."""
+    tapered = seg.radius_tip is not None
+    return Segment(
+        length=seg.length / n,
+        bending_stiffness=seg.bending_stiffness
+        * (seg.section_scale(np.asarray(j / n)) ** 4 if tapered else 1.0),
+        axial_stiffness=seg.axial_stiffness * n,
+        torsion_stiffness=seg.torsion_stiffness
+        * (seg.section_scale(np.asarray(j / n)) ** 4 if tapered else 1.0),
+        linear_density=seg.linear_density
+        * (seg.section_scale(np.asarray(j / n)) ** 2 if tapered else 1.0),
+        radius=seg.radius_at(np.asarray(j / n)),
+        radius_tip=seg.radius_at(np.asarray((j + 1) / n)) if tapered else None,
+        stiffening=law,
+        contraction_limit=seg.contraction_limit / n,
+    )
+
+
+def _tendon_on_pieces(t: Tendon, n: int) -> Tendon:
+    """A tendon on the robot with ``n`` pieces a segment (anchor and guides moved)."""
+    seg, s = _piece(t.segment, t.s, n, anchor=True)
+    guides = sorted(
+        {round(g * n - j, 12) for g in t.guides for j in range(n) if j <= g * n <= j + 1}
+    )
+    return Tendon(
+        seg,
+        t.angle,
+        t.offset,
+        s=s,
+        offset_end=t.offset_end,
+        bowden=t.bowden,
+        guides=guides,
+        mode=t.mode,
+        gain=t.gain,
+    )
+
+
+def _load_on_pieces(load, n: int):
+    """A load on the robot with ``n`` pieces a segment (gravity as it is; None for a kind of
+    load that is not carried over)."""
+    if isinstance(load, Gravity):
+        return load
+    seg, s = _piece(load.segment, float(load.s), n)
+    if isinstance(load, PointMass):
+        return PointMass(load.mass, seg, s)
+    if isinstance(load, PointForce):
+        return PointForce(load.force, seg, s, follower=load.follower)
+    if isinstance(load, PointMoment):
+        return PointMoment(load.moment, seg, s, follower=load.follower)
+    return None
 
 
 @dataclasses.dataclass
@@ -196,21 +203,11 @@ def synthetic_mocap(
         **solver_options: for :func:`pacjax.solve_batch`.
     """
     rng = np.random.default_rng(seed)
-    controls = np.asarray(controls, float)
-    if controls.ndim != 2 or controls.shape[1] != scene.n_tendons:
-        raise ValueError(
-            f"controls must have shape (frames, {scene.n_tendons}), got {controls.shape}"
-        )
-    sites = scene.markers if sites is None else normalise_sites(sites, scene.n_segments)
-    if not sites:
-        raise ValueError("no marker sites: pass sites= or give the scene markers")
-    if not (noise >= 0 and 0 <= dropout < 1):
-        raise ValueError("noise must be >= 0 and dropout in [0, 1)")
-    n_frames = controls.shape[0]
+    controls, sites = _check_request(scene, controls, sites, noise, dropout)
     # A provisional dataset (noise-free placeholders) carries and validates the frame loads.
     template = MocapDataset.from_arrays(
         controls,
-        np.zeros((n_frames, len(sites), 3)),
+        np.zeros((controls.shape[0], len(sites), 3)),
         sites,
         payload_mass,
         payload_site=payload_site,
@@ -223,6 +220,36 @@ def synthetic_mocap(
         truth_scene = high_fidelity(
             truth_scene, model=model, subdivisions=subdivisions, stiffening_rate=stiffening_rate
         )
+    loaded, q, ok = _truth_equilibria(scene, truth_scene, template, controls, solver_options)
+    world, rots = _site_poses(loaded, truth_scene.markers, q)
+    rotation, translation = _mocap_transform(transform, rng)
+    measured = _measured_markers(world, rotation, translation, noise, dropout, rng)
+    ori = None
+    if orientations:
+        ori = _measured_orientations(rotation, rots, orientation_noise, rng)
+    dataset = _kept_frames(template, np.flatnonzero(ok), measured, ori)
+    truth = SyntheticTruth(truth_scene, q, world, rotation, translation, np.flatnonzero(~ok))
+    return dataset, truth
+
+
+def _check_request(scene: Scene, controls, sites, noise, dropout):
+    """The checked controls (frames, n_tendons) and marker sites (default: the scene's)."""
+    controls = np.asarray(controls, float)
+    if controls.ndim != 2 or controls.shape[1] != scene.n_tendons:
+        raise ValueError(
+            f"controls must have shape (frames, {scene.n_tendons}), got {controls.shape}"
+        )
+    sites = scene.markers if sites is None else normalise_sites(sites, scene.n_segments)
+    if not sites:
+        raise ValueError("no marker sites: pass sites= or give the scene markers")
+    if not (noise >= 0 and 0 <= dropout < 1):
+        raise ValueError("noise must be >= 0 and dropout in [0, 1)")
+    return controls, sites
+
+
+def _truth_equilibria(scene: Scene, truth_scene: Scene, template, controls, solver_options):
+    """The truth's equilibria of every frame: ``(the truth with the frame loads, q of the
+    frames that converged to a stable equilibrium, the mask of those frames)``."""
     loaded, frame_loads = with_frame_loads(truth_scene, _remap_sites(template, scene, truth_scene))
     rows = frame_loads.rows(template)
     eq = solve_batch(
@@ -236,56 +263,74 @@ def synthetic_mocap(
     if not ok.any():
         raise ValueError("no frame of the ground truth converged to a stable equilibrium")
     if not ok.all():
-        warnings.warn(
-            f"{int((~ok).sum())} synthetic frame(s) did not converge; left out", stacklevel=2
+        warnings.warn(  # at the caller of synthetic_mocap
+            f"{int((~ok).sum())} synthetic frame(s) did not converge; left out", stacklevel=3
         )
+    return loaded, np.asarray(eq.q)[ok], ok
+
+
+def _site_poses(loaded: Scene, markers, q) -> tuple[np.ndarray, np.ndarray]:
+    """(frames, m, 3) positions and (frames, m, 3, 3) rotations at the marker sites (world)."""
     from .._model.query import site_frames
 
-    q = np.asarray(eq.q)[ok]
-    segs = np.asarray([x[0] for x in truth_scene.markers])
-    ss = np.asarray([x[1] for x in truth_scene.markers])
-    offs = np.asarray([x[2] for x in truth_scene.markers])
+    segs = np.asarray([x[0] for x in markers])
+    ss = np.asarray([x[1] for x in markers])
+    offs = np.asarray([x[2] for x in markers])
     world, rots = [], []
     for qk in q:
         pos, rot = site_frames(loaded, qk, segs, ss, offs)
         world.append(np.asarray(pos))
         rots.append(np.asarray(rot))
-    world, rots = np.stack(world), np.stack(rots)
+    return np.stack(world), np.stack(rots)
+
+
+def _mocap_transform(transform, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """``(rotation, translation)`` from the world frame to the mocap frame."""
     if transform is None:
-        rotation, translation = np.eye(3), np.zeros(3)
-    elif isinstance(transform, str) and transform == "random":
-        rotation, translation = random_rotation(rng), rng.uniform(-1.0, 1.0, 3)
-    else:
-        rotation, translation = (np.asarray(x, float) for x in transform)
+        return np.eye(3), np.zeros(3)
+    if isinstance(transform, str) and transform == "random":
+        return random_rotation(rng), rng.uniform(-1.0, 1.0, 3)
+    rotation, translation = (np.asarray(x, float) for x in transform)
+    return rotation, translation
+
+
+def _measured_markers(world, rotation, translation, noise, dropout, rng) -> np.ndarray:
+    """Marker positions in the mocap frame with Gaussian noise, and NaN where dropped (at least
+    one marker is kept in every frame)."""
     measured = world @ rotation.T + translation + noise * rng.normal(size=world.shape)
     if dropout > 0:
         miss = rng.random(measured.shape[:2]) < dropout
         miss[np.arange(len(miss)), rng.integers(0, miss.shape[1], len(miss))] = False
         measured[miss] = np.nan
-    ori = None
-    if orientations:
-        ori = np.einsum("ij,fmjk->fmik", rotation, rots)
-        if orientation_noise > 0:
-            from .._model.rotation import exp_so3
+    return measured
 
-            kicks = orientation_noise * rng.normal(size=ori.shape[:2] + (3,))
-            ori = np.einsum(
-                "fmij,fmjk->fmik", ori, np.asarray([[exp_so3(w) for w in f] for f in kicks])
-            )
-    keep = np.flatnonzero(ok)
-    dataset = MocapDataset.from_arrays(
-        controls[keep],
+
+def _measured_orientations(rotation, rots, orientation_noise, rng) -> np.ndarray:
+    """Site rotations in the mocap frame, turned by random kicks of ``orientation_noise`` rad."""
+    ori = np.einsum("ij,fmjk->fmik", rotation, rots)
+    if orientation_noise > 0:
+        from .._model.rotation import exp_so3
+
+        kicks = orientation_noise * rng.normal(size=ori.shape[:2] + (3,))
+        ori = np.einsum(
+            "fmij,fmjk->fmik", ori, np.asarray([[exp_so3(w) for w in f] for f in kicks])
+        )
+    return ori
+
+
+def _kept_frames(template: MocapDataset, keep, measured, orientations) -> MocapDataset:
+    """The dataset of the frames ``keep``: the template's controls and loads, the measurements."""
+    return MocapDataset.from_arrays(
+        template.controls[keep],
         measured,
-        sites,
+        template.sites,
         None if template.payload_mass is None else template.payload_mass[keep],
         payload_site=template.payload_site,
         force=None if template.force is None else template.force[keep],
         force_site=template.force_site,
-        force_follower=force_follower,
-        orientations=ori,
+        force_follower=template.force_follower,
+        orientations=orientations,
     )
-    truth = SyntheticTruth(truth_scene, q, world, rotation, translation, np.flatnonzero(~ok))
-    return dataset, truth
 
 
 def _with_markers(scene: Scene, sites) -> Scene:
