@@ -214,15 +214,15 @@ def test_batch_starts_follow_the_workspace_order(monkeypatch):
         hit = np.allclose(u0[0], controls[1])
         m = u0.shape[0]
         error = np.full(m, 1e-6 if hit else 1e-2)
-        return (
-            u0,
-            np.asarray(q0),
-            error,
-            np.zeros(m),
-            np.zeros((m, 3)),
-            np.broadcast_to(np.eye(3), (m, 3, 3)),
-            np.ones(m, bool),
-            np.full(m, 7),
+        return inverse_module.Solve(
+            controls=u0,
+            q=np.asarray(q0),
+            error=error,
+            orientation_error=np.zeros(m),
+            position=np.zeros((m, 3)),
+            rotation=np.broadcast_to(np.eye(3), (m, 3, 3)),
+            converged=np.ones(m, bool),
+            iterations=np.full(m, 7),
         )
 
     monkeypatch.setattr(inverse_module, "solve_many", stub)

@@ -36,6 +36,7 @@ from the previous commands and equilibrium), so the commands vary smoothly.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Mapping
 
@@ -53,6 +54,7 @@ from .._statics.equilibrium import solve_equilibrium
 from .._statics.options import SolverOptions, resolve_options
 from .problem import (
     CommandLimits,
+    Solve,
     checked_array,
     checked_finite,
     make_limits,
@@ -171,8 +173,11 @@ def _is_reached(settings, error, angle, ok):
     return (error <= settings.reached_tol) & (angle <= settings.orientation_tol) & ok
 
 
-def _result(scene, settings, u, q, error, angle, tip, rot, ok, iterations, starts):
-    reached = _is_reached(settings, np.asarray(error), np.asarray(angle), np.asarray(ok))
+def _result(scene, settings, best: Solve, starts) -> InverseResult:
+    """The :class:`InverseResult` of the best solve; ``best.iterations`` counts all starts."""
+    error, angle, ok = (np.asarray(x) for x in (best.error, best.orientation_error, best.converged))
+    reached = _is_reached(settings, error, angle, ok)
+    u, q = best.controls, best.q
     tensions = (
         tensions_at(scene, q, u)
         if np.ndim(u) == 1
@@ -181,22 +186,33 @@ def _result(scene, settings, u, q, error, angle, tip, rot, ok, iterations, start
     return InverseResult(
         controls=jnp.asarray(u),
         q=jnp.asarray(q),
-        error=jnp.asarray(error),
-        orientation_error=jnp.asarray(angle),
+        error=jnp.asarray(best.error),
+        orientation_error=jnp.asarray(best.orientation_error),
         reached=jnp.asarray(reached),
-        position=jnp.asarray(tip),
-        rotation=jnp.asarray(rot),
+        position=jnp.asarray(best.position),
+        rotation=jnp.asarray(best.rotation),
         tensions=jnp.asarray(tensions),
-        iterations=jnp.asarray(iterations),
+        iterations=jnp.asarray(best.iterations),
         starts=jnp.asarray(starts),
-        converged=jnp.asarray(ok),
-        result=inverse_result(reached, ok),
+        converged=jnp.asarray(best.converged),
+        result=inverse_result(reached, best.converged),
     )
 
 
 def _cost(settings, error, angle, weight):
     """Ranks candidate solutions: position error plus weighted orientation error (m)."""
     return np.asarray(error) + np.asarray(weight) * np.asarray(angle)
+
+
+def _tolerances(settings):
+    """``(rtol, atol, max_steps)`` of :func:`solve_one` / :func:`solve_many`: the tolerances
+    traced (one compiled solver for all of them), the step budget static."""
+    return jnp.asarray(settings.rtol), jnp.asarray(settings.atol), settings.max_steps
+
+
+def _reference_point(tgt, axis):
+    """The mean of the target's known points: what the nearest workspace samples are near."""
+    return np.nanmean(np.where(np.asarray(tgt.mask) > 0, np.asarray(tgt.points), np.nan), axis)
 
 
 # ------------------------------------------------------------------------------ public API
@@ -251,6 +267,25 @@ def inverse_statics(
     scene = static_load_sites(scene)
     settings = _settings(scene, _kwargs(kwargs))
     tgt = make_target(scene, target, rotation, orientation_weight, sites)
+    starts = _single_starts(scene, settings, tgt, controls0, q0, workspace)
+    weight = tgt.orientation_weight
+    best, best_cost, iterations = None, np.inf, 0
+    k = 0
+    for k, (u, q) in enumerate(starts, start=1):  # noqa: B007  (k: starts used)
+        out, steps = _solve_from_start(scene, tgt, settings, u, q)
+        iterations += steps
+        cost = float(_cost(settings, out.error, out.orientation_error, weight))
+        if best is None or cost < best_cost:
+            best, best_cost = out, cost
+        if _reached_one(settings, out):
+            break
+    return _result(scene, settings, dataclasses.replace(best, iterations=iterations), k)
+
+
+def _single_starts(scene, settings, tgt, controls0, q0, workspace):
+    """The starts of :func:`inverse_statics`, in the order they are tried: ``controls0`` (with
+    ``q0``), the nearest ``workspace`` samples, random commands; ``n_starts`` of them, each
+    ``(commands, equilibrium or None: to be solved)``."""
     starts = []
     if controls0 is not None:
         u = _check_start(scene, "controls0", controls0, (scene.n_tendons,))
@@ -259,52 +294,52 @@ def inverse_statics(
     elif q0 is not None:
         raise ValueError("q0 needs controls0 (the commands it is the equilibrium of)")
     if workspace is not None:
-        ref = np.nanmean(np.where(np.asarray(tgt.mask) > 0, np.asarray(tgt.points), np.nan), 0)
-        for i in workspace.nearest(ref, settings.n_starts):
+        for i in workspace.nearest(_reference_point(tgt, 0), settings.n_starts):
             starts.append((np.asarray(workspace.controls[i]), np.asarray(workspace.q[i])))
     starts += [(u, None) for u in _random_starts(settings, settings.n_starts)]
-    starts = starts[: settings.n_starts]
+    return starts[: settings.n_starts]
 
-    tol = (jnp.asarray(settings.rtol), jnp.asarray(settings.atol), settings.max_steps)
 
-    def solve_from(u, q):
-        """Levenberg-Marquardt from ``(u, q)``, then the polish; (result, iterations)."""
-        out = solve_one(scene, tgt, settings.limits, u, q, *tol, settings.options)
-        steps = int(out[-1])
-        if bool(out[6]) and float(out[2]) > _POLISH * settings.reached_tol:
-            free = _without_tension_weight(settings.limits)
-            polished = solve_one(scene, tgt, free, out[0], out[1], *tol, settings.options)
-            steps += int(polished[-1])
-            if bool(polished[6]) and float(polished[2]) < float(out[2]):
-                out = polished
-        return out, steps
+def _reached_one(settings, out: Solve) -> bool:
+    angle, ok = float(out.orientation_error), bool(out.converged)
+    return _is_reached(settings, float(out.error), angle, ok)
 
-    def reached(out):
-        return _is_reached(settings, float(out[2]), float(out[3]), bool(out[6]))
 
-    def cost(out):
-        return float(_cost(settings, out[2], out[3], tgt.orientation_weight))
+def _solve_from_start(scene, tgt, settings, u, q):
+    """One start of :func:`inverse_statics`: ``(the solve, iterations)``.
 
-    best, iterations = None, 0
-    k = 0
-    for k, (u, q) in enumerate(starts, start=1):  # noqa: B007  (k: starts used)
-        if q is None:
-            q = solve_equilibrium(scene, u, options=settings.options).q
-        out, steps = solve_from(jnp.asarray(u), jnp.asarray(q))
-        iterations += steps
-        if bool(out[6]) and not reached(out):  # stopped short: slack tendons pulled taut
-            u_taut, changed = taut_one(scene, settings.limits, out[0], out[1])
-            if bool(changed):
-                again, steps = solve_from(u_taut, out[1])
-                iterations += steps
-                if cost(again) < cost(out):
-                    out = again
-        if best is None or cost(out) < best[0]:
-            best = (cost(out), out)
-        if reached(out):
-            break
-    u, q, error, angle, tip, rot, ok, _ = best[1]
-    return _result(scene, settings, u, q, error, angle, tip, rot, ok, iterations, k)
+    Solves the equilibrium at ``u`` when ``q`` is None; a solve that stopped short of the target
+    at a converged equilibrium is tried again from its slack tendons pulled taut, and the closer
+    of the two kept.
+    """
+    if q is None:
+        q = solve_equilibrium(scene, u, options=settings.options).q
+    out, iterations = _solve_polished(scene, tgt, settings, jnp.asarray(u), jnp.asarray(q))
+    if bool(out.converged) and not _reached_one(settings, out):
+        u_taut, changed = taut_one(scene, settings.limits, out.controls, out.q)
+        if bool(changed):
+            again, steps = _solve_polished(scene, tgt, settings, u_taut, out.q)
+            iterations += steps
+            weight = tgt.orientation_weight
+            old = float(_cost(settings, out.error, out.orientation_error, weight))
+            if float(_cost(settings, again.error, again.orientation_error, weight)) < old:
+                out = again
+    return out, iterations
+
+
+def _solve_polished(scene, tgt, settings, u, q):
+    """Levenberg-Marquardt from ``(u, q)``, then the polish without the tension preference
+    where that preference biased a converged solve; ``(the better solve, iterations)``."""
+    tol = _tolerances(settings)
+    out = solve_one(scene, tgt, settings.limits, u, q, *tol, settings.options)
+    steps = int(out.iterations)
+    if bool(out.converged) and float(out.error) > _POLISH * settings.reached_tol:
+        free = _without_tension_weight(settings.limits)
+        polished = solve_one(scene, tgt, free, out.controls, out.q, *tol, settings.options)
+        steps += int(polished.iterations)
+        if bool(polished.converged) and float(polished.error) < float(out.error):
+            out = polished
+    return out, steps
 
 
 def _kwargs(kwargs):
@@ -347,115 +382,155 @@ def inverse_statics_batch(
     if chunk_size < 1:
         raise ValueError(f"chunk_size must be >= 1, got {chunk_size}")
     chunk = min(chunk_size, n)
-    nt = scene.n_tendons
-    # Start k of every target: with a workspace, its (k+1)-th nearest sample (after
-    # controls0, when given), as inverse_statics does; then random commands.
-    near = np.zeros((n, 0), int)
-    if workspace is not None:
-        ref = np.nanmean(np.where(np.asarray(tgt.mask) > 0, np.asarray(tgt.points), np.nan), 1)
-        near = workspace.nearest(ref, settings.n_starts)
-    if controls0 is not None:
-        u0 = np.broadcast_to(
-            checked_finite("controls0", checked_array("controls0", controls0)), (n, nt)
-        )
-        near = near[:, : settings.n_starts - 1]
-
-    def start(k, rows):
-        """Commands and equilibria of start ``k`` for the targets ``rows`` (full-size arrays)."""
-        u, q = np.zeros((n, nt)), np.zeros((n, scene.n_dofs))
-        j = k - (controls0 is not None)
-        if j < 0:
-            u[rows] = u0[rows]
-        elif j < near.shape[1]:
-            idx = near[rows, j]
-            u[rows], q[rows] = np.asarray(workspace.controls)[idx], np.asarray(workspace.q)[idx]
-            return u, q
-        else:
-            u[rows] = _random_starts(settings, n, key_offset=k)[rows]
-        q[rows] = np.asarray(solve_batch(scene, u[rows], chunk_size=chunk, progress=False).q)
-        return u, q
-
-    tol = (jnp.asarray(settings.rtol), jnp.asarray(settings.atol), settings.max_steps)
-    weight = np.asarray(tgt.orientation_weight)
-
-    def padded(rows):
-        """``rows`` in pieces of ``chunk``, each with its padded index array."""
-        for begin in range(0, rows.size, chunk):
-            part = np.arange(begin, min(begin + chunk, rows.size))
-            yield part, np.concatenate([part, np.repeat(part[-1:], chunk - part.size)])
-
-    def solve_rows(rows, u, q):
-        """Levenberg-Marquardt and the polish for the targets ``rows`` from ``u``, ``q``
-        (aligned with ``rows``), chunk by chunk; the 7 result fields and the iterations."""
-        parts = []
-        for part, pad in padded(rows):
-            sub = jtu.tree_map(lambda x, p=rows[pad]: x[p], tgt)
-            u_p, q_p = jnp.asarray(u[pad]), jnp.asarray(q[pad])
-            out = solve_many(scene, sub, settings.limits, u_p, q_p, *tol, settings.options)
-            out = [np.array(x)[: part.size] for x in out]
-            polish = out[6] & (out[2] > _POLISH * settings.reached_tol)
-            if np.any(polish):
-                free = _without_tension_weight(settings.limits)
-                again = solve_many(
-                    scene,
-                    sub,
-                    free,
-                    jnp.asarray(_pad_rows(out[0], chunk)),
-                    jnp.asarray(_pad_rows(out[1], chunk)),
-                    *tol,
-                    settings.options,
-                )
-                again = [np.asarray(x)[: part.size] for x in again]
-                take = polish & again[6] & (again[2] < out[2])
-                for f, x in zip(out[:7], again[:7], strict=True):
-                    f[take] = x[take]
-                out[7] = out[7] + np.where(polish, again[7], 0)
-            parts.append(out)
-        return [np.concatenate(f) for f in zip(*parts, strict=True)]
-
-    def retry_taut(rows, out):
-        """Rows that stopped short with slack tendons: again from those tendons pulled taut."""
-        miss = np.flatnonzero(out[6] & ~_is_reached(settings, out[2], out[3], out[6]))
-        if miss.size == 0:
-            return
-        u_taut, changed = np.zeros((miss.size, nt)), np.zeros(miss.size, bool)
-        for part, pad in padded(miss):
-            u_p, c_p = taut_many(scene, settings.limits, out[0][miss[pad]], out[1][miss[pad]])
-            u_taut[part], changed[part] = np.asarray(u_p)[: part.size], c_p[: part.size]
-        sel = miss[changed]
-        if sel.size == 0:
-            return
-        again = solve_rows(rows[sel], u_taut[changed], out[1][sel])
-        old = _cost(settings, out[2][sel], out[3][sel], weight[rows[sel]])
-        take = _cost(settings, again[2], again[3], weight[rows[sel]]) < old
-        for f, x in zip(out[:7], again[:7], strict=True):
-            f[sel[take]] = x[take]
-        out[7][sel] += again[7]
-
-    fields = None
-    cost = np.full(n, np.inf)
-    iterations = np.zeros(n, int)
-    starts = np.zeros(n, int)
+    starts = _BatchStarts(scene, settings, tgt, controls0, workspace, chunk)
+    best, cost = None, np.full(n, np.inf)
+    starts_used = np.zeros(n, int)
     todo = np.arange(n)
     for k in range(settings.n_starts):
-        u_start, q_start = start(k, todo)
-        out = solve_rows(todo, u_start[todo], q_start[todo])
-        retry_taut(todo, out)
-        if fields is None:
-            fields = [np.zeros((n,) + x.shape[1:], x.dtype) for x in out[:7]]
-        c = _cost(settings, out[2], out[3], weight[todo])
-        better = c < cost[todo]
-        for f, x in zip(fields, out[:7], strict=True):
-            f[todo[better]] = x[better]
-        cost[todo[better]] = c[better]
-        iterations[todo] += out[7]
-        starts[todo] += 1
-        reached = _is_reached(settings, fields[2], fields[3], fields[6])
+        u, q = starts(k, todo)
+        out = _solve_round(scene, tgt, settings, todo, u, q, chunk)
+        best = _keep_best(settings, tgt, best, cost, todo, out)
+        starts_used[todo] += 1
+        reached = _is_reached(settings, best.error, best.orientation_error, best.converged)
         todo = np.flatnonzero(~reached)
         if todo.size == 0:
             break
-    u_best, q, error, angle, tip, rot, ok = fields
-    return _result(scene, settings, u_best, q, error, angle, tip, rot, ok, iterations, starts)
+    return _result(scene, settings, best, starts_used)
+
+
+class _BatchStarts:
+    """Start ``k`` of every target of :func:`inverse_statics_batch`, in the order of
+    :func:`inverse_statics`: ``controls0`` (when given), then the target's nearest
+    ``workspace`` samples, then random commands (drawn for start ``k``)."""
+
+    def __init__(self, scene, settings, tgt, controls0, workspace, chunk):
+        self.scene, self.settings, self.workspace, self.chunk = scene, settings, workspace, chunk
+        n = tgt.points.shape[0]
+        self.n = n
+        #: (n, j): the workspace samples of the starts after ``controls0``, nearest first.
+        self.near = np.zeros((n, 0), int)
+        if workspace is not None:
+            self.near = workspace.nearest(_reference_point(tgt, 1), settings.n_starts)
+        self.u0 = None
+        if controls0 is not None:
+            u0 = checked_finite("controls0", checked_array("controls0", controls0))
+            self.u0 = np.broadcast_to(u0, (n, scene.n_tendons))
+            self.near = self.near[:, : settings.n_starts - 1]
+
+    def __call__(self, k, rows):
+        """Commands and equilibria of start ``k`` for the targets ``rows`` (aligned with
+        ``rows``); the equilibria of other than workspace samples are solved."""
+        j = k - (self.u0 is not None)
+        if j < 0:
+            u = self.u0[rows]
+        elif j < self.near.shape[1]:
+            idx = self.near[rows, j]
+            ws = self.workspace
+            return np.asarray(ws.controls, float)[idx], np.asarray(ws.q, float)[idx]
+        else:
+            u = _random_starts(self.settings, self.n, key_offset=k)[rows]
+        eq = solve_batch(self.scene, u, chunk_size=self.chunk, progress=False)
+        return u, np.asarray(eq.q, float)
+
+
+def _solve_round(scene, tgt, settings, rows, u, q, chunk) -> Solve:
+    """One start for the targets ``rows`` from ``u``, ``q`` (aligned with ``rows``):
+    Levenberg-Marquardt and the polish, then the retry from slack tendons pulled taut where a
+    solve stopped short. NumPy fields, aligned with ``rows``."""
+    out = _solve_rows(scene, tgt, settings, rows, u, q, chunk)
+    _retry_taut(scene, tgt, settings, rows, out, chunk)
+    return out
+
+
+def _keep_best(settings, tgt, best, cost, rows, out):
+    """Merges one round's solves ``out`` of the targets ``rows`` into ``best`` (all targets;
+    allocated on the first round): a solve replaces a row where it ranks better than
+    ``cost`` (updated in place), and the iterations of every solve add up."""
+    if best is None:
+        n = cost.shape[0]
+        best = jtu.tree_map(lambda x: np.zeros((n,) + x.shape[1:], x.dtype), out)
+        best = dataclasses.replace(best, iterations=np.zeros(n, int))
+    c = _cost(settings, out.error, out.orientation_error, np.asarray(tgt.orientation_weight)[rows])
+    better = c < cost[rows]
+    _put(best, out, better, at=rows)
+    cost[rows[better]] = c[better]
+    best.iterations[rows] += out.iterations
+    return best
+
+
+#: The fields of :class:`Solve` that a better solve replaces (its iterations add up instead).
+_MERGED = tuple(f.name for f in dataclasses.fields(Solve) if f.name != "iterations")
+
+
+def _put(into: Solve, new: Solve, where, at=None) -> None:
+    """Copies the rows ``where`` of ``new`` into the rows ``at[where]`` (``where`` without
+    ``at``) of ``into``, in place: every field but ``iterations``, which the callers add up."""
+    rows = where if at is None else at[where]
+    for field in _MERGED:
+        getattr(into, field)[rows] = getattr(new, field)[where]
+
+
+def _head(out: Solve, size) -> Solve:
+    """The first ``size`` rows of a padded chunk's solves, as writable NumPy arrays."""
+    return jtu.tree_map(lambda x: np.array(x)[:size], out)
+
+
+def _padded(rows, chunk):
+    """``rows`` in pieces of ``chunk``, each with its padded index array (every call of a
+    batched solver gets ``chunk`` rows: one compiled program)."""
+    for begin in range(0, rows.size, chunk):
+        part = np.arange(begin, min(begin + chunk, rows.size))
+        yield part, np.concatenate([part, np.repeat(part[-1:], chunk - part.size)])
+
+
+def _solve_rows(scene, tgt, settings, rows, u, q, chunk) -> Solve:
+    """Levenberg-Marquardt and the polish for the targets ``rows`` from ``u``, ``q`` (aligned
+    with ``rows``), chunk by chunk; NumPy fields aligned with ``rows``."""
+    parts = []
+    for part, pad in _padded(rows, chunk):
+        sub = jtu.tree_map(lambda x, p=rows[pad]: x[p], tgt)
+        parts.append(_solve_chunk(scene, sub, settings, u[pad], q[pad], part.size, chunk))
+    return jtu.tree_map(lambda *xs: np.concatenate(xs), *parts)
+
+
+def _solve_chunk(scene, sub, settings, u, q, size, chunk) -> Solve:
+    """One padded chunk (targets ``sub``, starts ``u``, ``q``): Levenberg-Marquardt, then the
+    polish without the tension preference where it biased a converged solve; the first
+    ``size`` rows."""
+    tol = _tolerances(settings)
+    u, q = jnp.asarray(u), jnp.asarray(q)
+    out = _head(solve_many(scene, sub, settings.limits, u, q, *tol, settings.options), size)
+    polish = out.converged & (out.error > _POLISH * settings.reached_tol)
+    if np.any(polish):
+        free = _without_tension_weight(settings.limits)
+        u, q = jnp.asarray(_pad_rows(out.controls, chunk)), jnp.asarray(_pad_rows(out.q, chunk))
+        again = _head(solve_many(scene, sub, free, u, q, *tol, settings.options), size)
+        _put(out, again, polish & again.converged & (again.error < out.error))
+        iterations = out.iterations + np.where(polish, again.iterations, 0)
+        out = dataclasses.replace(out, iterations=iterations)
+    return out
+
+
+def _retry_taut(scene, tgt, settings, rows, out: Solve, chunk) -> None:
+    """Rows of ``out`` that stopped short with slack tendons: again from those tendons pulled
+    taut; a retry that ranks better replaces the row (in place), its iterations add up."""
+    reached = _is_reached(settings, out.error, out.orientation_error, out.converged)
+    miss = np.flatnonzero(out.converged & ~reached)
+    if miss.size == 0:
+        return
+    u_taut, changed = np.zeros((miss.size, scene.n_tendons)), np.zeros(miss.size, bool)
+    for part, pad in _padded(miss, chunk):
+        u_p, c_p = taut_many(scene, settings.limits, out.controls[miss[pad]], out.q[miss[pad]])
+        u_taut[part], changed[part] = np.asarray(u_p)[: part.size], c_p[: part.size]
+    sel = miss[changed]
+    if sel.size == 0:
+        return
+    again = _solve_rows(scene, tgt, settings, rows[sel], u_taut[changed], out.q[sel], chunk)
+    weight = np.asarray(tgt.orientation_weight)[rows[sel]]
+    old = _cost(settings, out.error[sel], out.orientation_error[sel], weight)
+    take = _cost(settings, again.error, again.orientation_error, weight) < old
+    _put(out, again, take, at=sel)
+    out.iterations[sel] += again.iterations
 
 
 def track(
@@ -483,17 +558,14 @@ def track(
     kw = _kwargs(kwargs)
     _settings(scene, dict(kw))  # check the options before the first solve
     tgt = make_target(scene, waypoints, rotation, orientation_weight, sites, batched=True)
-    n = tgt.points.shape[0]
     start = time.perf_counter()
     results = []
     u, q = controls0, q0
-    for i in range(n):
-        one = jtu.tree_map(lambda x, i=i: x[i], tgt)
-        point = np.asarray(waypoints, float)[i]
-        rot_i = None if rotation is None else np.asarray(one.rotation)
+    for i in range(tgt.points.shape[0]):
+        rot_i = None if rotation is None else np.asarray(tgt.rotation[i])
         res = inverse_statics(
             scene,
-            point,
+            np.asarray(waypoints, float)[i],
             rotation=rot_i,
             orientation_weight=orientation_weight,
             sites=sites,
@@ -505,9 +577,14 @@ def track(
         results.append(res)
         u, q = np.asarray(res.controls), np.asarray(res.q)
     jax.block_until_ready(results[-1])
-    seconds = time.perf_counter() - start
+    return _tracking(results, time.perf_counter() - start)
+
+
+def _tracking(results, seconds) -> Tracking:
+    """The waypoints' results stacked, with the largest command jump between neighbours."""
     stacked = jtu.tree_map(lambda *xs: jnp.stack(xs), *results)
     u_all = np.asarray(stacked.controls)
+    n = len(results)
     jump = float(np.max(np.abs(np.diff(u_all, axis=0)))) if n > 1 else 0.0
     return Tracking(
         waypoints=stacked, max_command_jump=jump, seconds=seconds, waypoints_per_second=n / seconds

@@ -10,7 +10,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
-from jaxtyping import Array, Float
+from jaxtyping import Array, Bool, Float, Int
 
 from .._config import MATMUL_PRECISION
 from .._model.rotation import matvec3
@@ -153,7 +153,32 @@ def _residual(scene, target, limits, q0, z, options):
     return jnp.where(ok, r, _FAILED_RESIDUAL), (q, ok)
 
 
-def _solve_core(scene, target, limits, u0, q0, rtol, atol, max_steps, options):
+class Solve(eqx.Module):
+    """Where one Levenberg-Marquardt solve stopped (a leading batch axis from :func:`solve_many`).
+
+    The solvers return JAX arrays; the batch workflow keeps NumPy copies and merges them row by
+    row (the fields but ``iterations`` are replaced together, ``iterations`` add up).
+    """
+
+    #: (n_tendons,) commands where the solve stopped (m pull-in, or N tension).
+    controls: Float[Array, "*batch n_tendons"]
+    #: (n_dofs,) the equilibrium under ``controls``.
+    q: Float[Array, "*batch n_dofs"]
+    #: position error (m): tip, or the worst marker site; inf where ``converged`` is False.
+    error: Float[Array, "*batch"]
+    #: angle (rad) between the reached and the target tip orientation (0 but for poses).
+    orientation_error: Float[Array, "*batch"]
+    #: (3,) reached tip position (m).
+    position: Float[Array, "*batch 3"]
+    #: (3, 3) reached tip orientation.
+    rotation: Float[Array, "*batch 3 3"]
+    #: the equilibrium at ``controls`` converged and is stable.
+    converged: Bool[Array, "*batch"]
+    #: Levenberg-Marquardt iterations.
+    iterations: Int[Array, "*batch"]
+
+
+def _solve_core(scene, target, limits, u0, q0, rtol, atol, max_steps, options) -> Solve:
     """One Levenberg-Marquardt solve from ``u0`` (traceable, vmappable)."""
     solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol)
     z0 = _latent(u0, limits)
@@ -170,7 +195,16 @@ def _solve_core(scene, target, limits, u0, q0, rtol, atol, max_steps, options):
     q, ok = sol.aux
     error, angle, tip, rot = _errors(scene, target, q)
     error = jnp.where(ok, error, jnp.inf)
-    return u, q, error, angle, tip, rot, ok, sol.stats["num_steps"]
+    return Solve(
+        controls=u,
+        q=q,
+        error=error,
+        orientation_error=angle,
+        position=tip,
+        rotation=rot,
+        converged=ok,
+        iterations=sol.stats["num_steps"],
+    )
 
 
 solve_one = eqx.filter_jit(_solve_core)
@@ -236,52 +270,17 @@ def checked_finite(name, arr):
 
 
 def make_target(scene, target, rotation, orientation_weight, sites, batched=False):
-    """A :class:`_Target` (with a leading batch axis when ``batched``)."""
-    lead = (-1,) if batched else ()
+    """A :class:`_Target` (with a leading batch axis when ``batched``).
+
+    Checks, in this order: the target (a tip position, or one position per marker site), the
+    rotation (pose targets), the orientation weight.
+    """
     if sites is None:
-        arr = checked_array("target", target)
-        ok = arr.shape == (3,) if not batched else (arr.ndim == 2 and arr.shape[1:] == (3,))
-        if not ok or arr.size == 0:
-            what = "(3,) (a tip position in m)" if not batched else "(n_targets, 3)"
-            hint = "; pass sites= for marker targets" if arr.ndim >= 2 and not batched else ""
-            raise ValueError(f"target must have shape {what}, got {arr.shape}{hint}")
-        checked_finite("target", arr)
-        points = arr.reshape(lead + (1, 3))
-        sites = ((scene.n_segments - 1, 1.0, (0.0, 0.0, 0.0)),)
-        kind = "position" if rotation is None else "pose"
+        points, sites, kind = _tip_points(scene, target, rotation, batched)
     else:
-        sites = normalise_sites(sites, scene.n_segments, "sites")
-        if not sites:
-            raise ValueError("sites must hold at least one (segment, s) marker site")
-        if rotation is not None:
-            raise ValueError("rotation= applies to a tip target, not to marker sites")
-        arr = checked_array("target", target)
-        m = len(sites)
-        if arr.shape[-2:] != (m, 3) or arr.ndim != (3 if batched else 2):
-            want = f"({'n_targets, ' if batched else ''}{m}, 3)"
-            raise ValueError(f"target must have shape {want} (one xyz per site), got {arr.shape}")
-        if np.any(np.isinf(arr)):
-            raise ValueError("target must not hold infinite values (NaN marks a missing marker)")
-        if np.any(np.all(np.isnan(arr), axis=(-1, -2))):
-            raise ValueError("every target needs at least one known marker position")
-        points = arr
-        kind = "markers"
+        points, sites, kind = _marker_points(scene, target, rotation, sites, batched)
     n_batch = points.shape[0] if batched else None
-    if rotation is not None:
-        rot = checked_array("rotation", rotation)
-        want = (3, 3) if not batched else (n_batch, 3, 3)
-        if rot.shape == (3, 3) and batched:
-            rot = np.broadcast_to(rot, want)
-        if rot.shape != want:
-            raise ValueError(f"rotation must have shape {want}, got {rot.shape}")
-        checked_finite("rotation", rot)
-        eye = np.broadcast_to(np.eye(3), rot.shape)
-        if not np.allclose(np.swapaxes(rot, -1, -2) @ rot, eye, atol=1e-6) or np.any(
-            np.linalg.det(rot) < 0
-        ):
-            raise ValueError("rotation must be a rotation matrix (orthonormal, det +1)")
-    else:
-        rot = np.broadcast_to(np.eye(3), (n_batch, 3, 3) if batched else (3, 3))
+    rot = _target_rotation(rotation, batched, n_batch)
     weight = float(orientation_weight)
     if not (np.isfinite(weight) and weight > 0):
         raise ValueError(f"orientation_weight must be > 0 (m per rad), got {orientation_weight}")
@@ -301,6 +300,62 @@ def make_target(scene, target, rotation, orientation_weight, sites, batched=Fals
         rotation=jnp.asarray(rot),
         orientation_weight=jnp.asarray(per_batch(np.asarray(weight))),
     )
+
+
+def _tip_points(scene, target, rotation, batched):
+    """A tip target, checked: ``(points (..., 1, 3), the tip as the one site, kind)``."""
+    arr = checked_array("target", target)
+    ok = arr.shape == (3,) if not batched else (arr.ndim == 2 and arr.shape[1:] == (3,))
+    if not ok or arr.size == 0:
+        what = "(3,) (a tip position in m)" if not batched else "(n_targets, 3)"
+        hint = "; pass sites= for marker targets" if arr.ndim >= 2 and not batched else ""
+        raise ValueError(f"target must have shape {what}, got {arr.shape}{hint}")
+    checked_finite("target", arr)
+    lead = (-1,) if batched else ()
+    points = arr.reshape(lead + (1, 3))
+    sites = ((scene.n_segments - 1, 1.0, (0.0, 0.0, 0.0)),)
+    return points, sites, "position" if rotation is None else "pose"
+
+
+def _marker_points(scene, target, rotation, sites, batched):
+    """A marker target, checked: ``(points (..., m, 3) with NaN for missing coordinates, the
+    normalised sites, "markers")``."""
+    sites = normalise_sites(sites, scene.n_segments, "sites")
+    if not sites:
+        raise ValueError("sites must hold at least one (segment, s) marker site")
+    if rotation is not None:
+        raise ValueError("rotation= applies to a tip target, not to marker sites")
+    arr = checked_array("target", target)
+    m = len(sites)
+    if arr.shape[-2:] != (m, 3) or arr.ndim != (3 if batched else 2):
+        want = f"({'n_targets, ' if batched else ''}{m}, 3)"
+        raise ValueError(f"target must have shape {want} (one xyz per site), got {arr.shape}")
+    if np.any(np.isinf(arr)):
+        raise ValueError("target must not hold infinite values (NaN marks a missing marker)")
+    if np.any(np.all(np.isnan(arr), axis=(-1, -2))):
+        raise ValueError("every target needs at least one known marker position")
+    return arr, sites, "markers"
+
+
+def _target_rotation(rotation, batched, n_batch):
+    """The target tip orientation, checked ((3, 3), or (n_batch, 3, 3) when ``batched``; one
+    (3, 3) is shared by all targets); the identity for position and marker targets, whose
+    orientation error is not part of the residual."""
+    if rotation is None:
+        return np.broadcast_to(np.eye(3), (n_batch, 3, 3) if batched else (3, 3))
+    rot = checked_array("rotation", rotation)
+    want = (3, 3) if not batched else (n_batch, 3, 3)
+    if rot.shape == (3, 3) and batched:
+        rot = np.broadcast_to(rot, want)
+    if rot.shape != want:
+        raise ValueError(f"rotation must have shape {want}, got {rot.shape}")
+    checked_finite("rotation", rot)
+    eye = np.broadcast_to(np.eye(3), rot.shape)
+    if not np.allclose(np.swapaxes(rot, -1, -2) @ rot, eye, atol=1e-6) or np.any(
+        np.linalg.det(rot) < 0
+    ):
+        raise ValueError("rotation must be a rotation matrix (orthonormal, det +1)")
+    return rot
 
 
 def default_command_range(scene: Scene, max_contraction: float = 0.5) -> tuple[np.ndarray, ...]:
