@@ -429,7 +429,8 @@ class _BatchStarts:
             return np.asarray(ws.controls, float)[idx], np.asarray(ws.q, float)[idx]
         else:
             u = _random_starts(self.settings, self.n, key_offset=k)[rows]
-        eq = solve_batch(self.scene, u, chunk_size=self.chunk, progress=False)
+        options = self.settings.options
+        eq = solve_batch(self.scene, u, chunk_size=self.chunk, progress=False, options=options)
         return u, np.asarray(eq.q, float)
 
 
