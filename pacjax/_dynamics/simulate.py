@@ -343,31 +343,10 @@ def simulate(
     """
     check_scene(scene)
     dtype = solver_dtype(scene)
-    for i, seg in enumerate(scene.robot.segments):
-        density = concrete(seg.linear_density)
-        if density is not None and not density > 0:
-            raise ValueError(
-                f"Robot.segments[{i}].linear_density must be > 0 to simulate dynamics "
-                f"(the mass matrix would be singular), got {density}"
-            )
-    if scene.model.has_twist_strain():
-        for i, seg in enumerate(scene.robot.segments):
-            radius = concrete(seg.radius)
-            if radius is not None and not radius > 0:
-                raise ValueError(
-                    f"Robot.segments[{i}].radius must be > 0 to simulate a twisting model "
-                    "(twist moves no mass on a zero-radius body)"
-                )
+    _check_body(scene)
     t0, t1 = _check_span(t_span)
     ts = _check_saveat(saveat, t0, t1)
-    if callable(controls):
-        shape = jax.eval_shape(controls, jnp.asarray(t0, dtype)).shape
-        if shape != (scene.n_tendons,):
-            raise ValueError(
-                f"controls(t) must return shape ({scene.n_tendons},) (one per tendon), got {shape}"
-            )
-    else:
-        controls = check_controls(scene, controls, dtype)
+    controls = _check_controls(scene, controls, t0, dtype)
     q0 = check_q(scene, q0, dtype)
     if qdot0 is None:
         qdot0 = jnp.zeros(scene.n_dofs, dtype)
@@ -383,15 +362,7 @@ def simulate(
     # Known point-mass sites become knots of the kinematics (as in the statics): a traced site
     # integrates its own frame in every kinematics pass, and the vector field has several.
     scene = static_load_sites(as_traced_leaves(scene, dtype))
-    if damping is None:
-        damping = Damping.modal(scene)
-    elif not isinstance(damping, Damping):
-        raise TypeError(f"damping must be a pacjax.Damping, got {type(damping).__name__}")
-    if damping.tendon is not None and jnp.ndim(damping.tendon) == 1:
-        if damping.tendon.shape != (scene.n_tendons,):
-            raise ValueError(
-                f"Damping.tendon must have shape ({scene.n_tendons},), got {damping.tendon.shape}"
-            )
+    damping = _check_damping(scene, damping)
     opts = _Options(
         solver=kvaerno5() if solver is None else solver,
         rtol=float(rtol),
@@ -405,6 +376,51 @@ def simulate(
     span = jnp.asarray([t0, t1], dtype)
     dt0 = None if dt0 is None else jnp.asarray(dt0, dtype)
     return _simulate(scene, damping, controls, q0, qdot0, span, jnp.asarray(ts, dtype), dt0, opts)
+
+
+def _check_body(scene: Scene) -> None:
+    """A body that has a mass matrix: mass on every segment, and a radius for twist."""
+    for i, seg in enumerate(scene.robot.segments):
+        density = concrete(seg.linear_density)
+        if density is not None and not density > 0:
+            raise ValueError(
+                f"Robot.segments[{i}].linear_density must be > 0 to simulate dynamics "
+                f"(the mass matrix would be singular), got {density}"
+            )
+    if scene.model.has_twist_strain():
+        for i, seg in enumerate(scene.robot.segments):
+            radius = concrete(seg.radius)
+            if radius is not None and not radius > 0:
+                raise ValueError(
+                    f"Robot.segments[{i}].radius must be > 0 to simulate a twisting model "
+                    "(twist moves no mass on a zero-radius body)"
+                )
+
+
+def _check_controls(scene: Scene, controls, t0: float, dtype):
+    """Constant controls checked as a solve's; a schedule ``controls(t)`` by its output shape."""
+    if not callable(controls):
+        return check_controls(scene, controls, dtype)
+    shape = jax.eval_shape(controls, jnp.asarray(t0, dtype)).shape
+    if shape != (scene.n_tendons,):
+        raise ValueError(
+            f"controls(t) must return shape ({scene.n_tendons},) (one per tendon), got {shape}"
+        )
+    return controls
+
+
+def _check_damping(scene: Scene, damping) -> Damping:
+    """The given damping, or the default modal one (5 % on the lowest mode)."""
+    if damping is None:
+        return Damping.modal(scene)
+    if not isinstance(damping, Damping):
+        raise TypeError(f"damping must be a pacjax.Damping, got {type(damping).__name__}")
+    if damping.tendon is not None and jnp.ndim(damping.tendon) == 1:
+        if damping.tendon.shape != (scene.n_tendons,):
+            raise ValueError(
+                f"Damping.tendon must have shape ({scene.n_tendons},), got {damping.tendon.shape}"
+            )
+    return damping
 
 
 @eqx.filter_jit
