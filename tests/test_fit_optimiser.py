@@ -1,11 +1,11 @@
 """The safeguards of the fit's Levenberg-Marquardt loop
-(pacjax._identify.identify._LevenbergMarquardt):
+(pacjax._identify.optimise.LevenbergMarquardt):
 a bounded step and a damping that follows the gain ratio."""
 
 import numpy as np
 import pytest
 
-from pacjax._identify.identify import _LevenbergMarquardt
+from pacjax._identify.optimise import LevenbergMarquardt as _LevenbergMarquardt
 
 
 def _problem():

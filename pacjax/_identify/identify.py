@@ -35,9 +35,9 @@ from .. import _deprecated
 from .._model.frameloads import with_frame_loads
 from .._model.inputs import check_scene
 from .._model.scene import Scene, normalise_sites
-from .._results import RESULTS
 from .._statics.options import SolverOptions, resolve_options
 from .dataset import MocapDataset
+from .optimise import optimise
 from .problem import (
     L2_DELTA,
     PARAMETERS,
@@ -192,8 +192,16 @@ def identify(
     theta = np.zeros(fit.problem.n_theta)
     align = "mocap_transform" in params and mocap_transform is None
     fit, current, first_eval_s = _start(fit, train, theta, align)
-    theta, current, history, stop = _optimise(
-        fit, train, theta, current, optimizer, max_iterations, tol, progress
+    theta, current, history, stop = optimise(
+        train,
+        theta,
+        current,
+        optimizer,
+        max_iterations,
+        tol,
+        progress,
+        fit.n_observations,
+        fit.dataset.markers,
     )
     return _report(fit, train, theta, current, history, stop, t_start, first_eval_s)
 
@@ -324,111 +332,6 @@ def _start(fit: _Fit, train: Evaluator, theta, align: bool):
     return fit, current, first_eval_s
 
 
-def _optimise(fit: _Fit, train, theta, current, optimizer, max_iterations, tol, progress):
-    """Levenberg-Marquardt (or optax) iterations from ``theta``; each trial point's equilibria
-    are warm-started from the current ones. Returns the optimum, its evaluation, the loss and
-    RMSE histories and ``(iterations, result, message)``."""
-    history = _History(current, fit.n_observations, fit.dataset.markers, max_iterations, progress)
-    if isinstance(optimizer, str):
-        theta, current, stop = _levenberg_marquardt(
-            train, theta, current, max_iterations, tol, history
-        )
-    else:
-        theta, current, stop = _optax_descent(
-            train, theta, current, optimizer, max_iterations, tol, history
-        )
-    history.bar.close()
-    return theta, current, (history.losses, history.rmse), stop
-
-
-class _History:
-    """Loss and training RMSE after every accepted iteration, and the progress bar."""
-
-    def __init__(self, current, n_obs: int, markers, max_iterations: int, progress):
-        from tqdm.auto import tqdm
-
-        self.n_obs, self.markers = n_obs, markers
-        self.losses = [current.cost() / n_obs]
-        self.rmse = [_rmse_mm(current.pred, markers)]
-        self.bar = tqdm(
-            total=max_iterations,
-            desc="identify",
-            unit="it",
-            disable=None if progress is None else not progress,
-            leave=False,
-        )
-
-    def accept(self, current) -> None:
-        """Record the evaluation of an accepted step."""
-        self.losses.append(current.cost() / self.n_obs)
-        self.rmse.append(_rmse_mm(current.pred, self.markers))
-        self.bar.update()
-        self.bar.set_postfix_str(f"RMSE {self.rmse[-1]:.3f} mm")
-
-
-def _levenberg_marquardt(train, theta, current, max_iterations, tol, history: _History):
-    """The Levenberg-Marquardt loop; returns ``(theta, evaluation, (iterations, result,
-    message))``."""
-    result, message = RESULTS.max_steps_reached, "iteration limit reached"
-    iterations = 0
-    lm = _LevenbergMarquardt()
-    while iterations < max_iterations:
-        r, jac = current.stacked()
-        step, predicted = lm.step(jac, r)
-        if predicted <= tol * current.cost():
-            result, message = RESULTS.successful, "converged (no decrease left to gain)"
-            break
-        trial = train(theta + step, q0=current.q)
-        ok = bool(np.all(trial.valid[current.valid]))
-        actual = current.cost() - trial.cost(current.valid) if ok else -np.inf
-        if lm.update(actual / predicted, np.max(np.abs(step)), ok):
-            decrease = actual / max(current.cost(), 1e-300)
-            theta, current = theta + step, trial
-            iterations += 1
-            history.accept(current)
-            if np.max(np.abs(step)) < np.sqrt(tol) or decrease < tol:
-                result, message = (
-                    RESULTS.successful,
-                    "converged (step or loss change below tolerance)",
-                )
-                break
-        elif lm.rejected >= _LevenbergMarquardt.MAX_REJECTED:
-            result = RESULTS.successful if ok else RESULTS.no_equilibrium
-            message = (
-                "converged (no step reduces the loss further: at the solver's accuracy)"
-                if ok
-                else "stopped: equilibria fail to converge along every trial step"
-            )
-            break
-    return theta, current, (iterations, result, message)
-
-
-def _optax_descent(train, theta, current, optimizer, max_iterations, tol, history: _History):
-    """An optax optimiser driven with the gradient ``J^T r``; returns ``(theta, evaluation,
-    (iterations, result, message))``."""
-    result, message = RESULTS.max_steps_reached, "iteration limit reached"
-    iterations = 0
-    state = optimizer.init(theta)
-    while iterations < max_iterations:
-        r, jac = current.stacked()
-        updates, state = optimizer.update(jac.T @ r, state, theta)
-        new_theta = np.asarray(optax.apply_updates(theta, updates))
-        trial = train(new_theta, q0=current.q)
-        if not np.all(trial.valid[current.valid]):
-            result = RESULTS.no_equilibrium
-            message = "stopped: a frame failed to converge along the optax path"
-            break
-        previous = current.cost()
-        theta, current = new_theta, trial
-        iterations += 1
-        history.accept(current)
-        if abs(previous - current.cost()) < tol * max(previous, 1e-300):
-            result, message = RESULTS.successful, "converged (loss change below tolerance)"
-            break
-    return theta, current, (iterations, result, message)
-
-
-# ------------------------------------------------------------------------------ the report
 def _report(fit: _Fit, train, theta, current, history, stop, t_start, first_eval_s):
     """The fitted scene and the :class:`IdentificationReport` of the optimum ``theta``."""
     problem = fit.problem
@@ -554,61 +457,3 @@ def _fitted_scene(fitted: Scene, fit_scene: Scene, sites, offsets) -> Scene:
         quadrature_points=fit_scene.quadrature_points,
         rotation_substeps=fit_scene.rotation_substeps,
     )
-
-
-class _LevenbergMarquardt:
-    """Damping and step bound of the fit's Levenberg-Marquardt iterations.
-
-    The residuals come from a batch of equilibria, warm-started from the current ones, and a
-    trial point whose equilibria fail is a rejected step, so the loop stays here rather than in
-    ``optimistix``. Two safeguards keep a poor linear model from throwing the fit far out:
-
-    - the damping follows the gain ratio ``rho`` (actual over predicted decrease; Nielsen's
-      update, Madsen, Nielsen & Tingleff 2004, eq. 3.15): a step that lowers the loss but far
-      less than predicted raises the damping instead of lowering it;
-    - no internal coordinate moves by more than ``radius`` per step (log-scaled parameters by
-      a factor ``e`` at most at the start). The radius halves on a rejected or poor step and
-      doubles, up to :attr:`MAX_RADIUS`, on a good one.
-
-    Without them the follower-force fit of the paper study took one step that raised
-    ``tendon_gain`` 4-35x past the truth and ``stiffening`` 5x, from where every trial point
-    had frames whose equilibria failed.
-    """
-
-    MAX_RADIUS = 4.0
-    MAX_REJECTED = 8
-
-    def __init__(self):
-        self.damping, self.nu, self.radius, self.rejected = 1e-3, 2.0, 1.0, 0
-
-    def step(self, jac, r):
-        """The damped Gauss-Newton step, cut back to the radius, and its predicted decrease of
-        ``0.5 |r|^2``."""
-        jtj, g = jac.T @ jac, jac.T @ r
-        diag = np.maximum(np.diag(jtj), 1e-12 * max(np.max(np.diag(jtj)), 1e-300))
-        step = np.linalg.solve(jtj + self.damping * np.diag(diag), -g)
-        size = np.max(np.abs(step))
-        if size > self.radius:
-            step = step * (self.radius / size)
-        return step, -(g @ step + 0.5 * step @ jtj @ step)
-
-    def update(self, rho: float, size: float, ok: bool) -> bool:
-        """Adapt to the gain ratio of the step just tried; True when it is accepted."""
-        if ok and rho > 1e-3:
-            self.damping = max(self.damping * max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3), 1e-12)
-            self.nu, self.rejected = 2.0, 0
-            if rho > 0.75:
-                self.radius = min(max(self.radius, 2.0 * size), self.MAX_RADIUS)
-            elif rho < 0.25:
-                self.radius = 0.5 * size
-            return True
-        self.damping *= self.nu
-        self.nu *= 2.0
-        self.radius = 0.5 * size
-        self.rejected += 1
-        return False
-
-
-def _rmse_mm(pred: np.ndarray, measured: np.ndarray) -> float:
-    d = np.linalg.norm(pred - measured, axis=-1)
-    return float(1e3 * np.sqrt(np.nanmean(d**2)))
