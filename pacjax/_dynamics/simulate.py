@@ -58,6 +58,7 @@ from .._model.inputs import (
     check_controls,
     check_q,
     check_scene,
+    frozen,
     solver_dtype,
     static_load_sites,
 )
@@ -442,7 +443,7 @@ def _aligned_rest_start(scene: Scene, controls, q0, qdot0, t0):
         return q0
     u0 = controls(t0) if callable(controls) else controls
     moving = jnp.any(scene.coordinates(qdot0)[:, :k] != 0, axis=1)
-    problem = jax.lax.stop_gradient(ScaledProblem.build(scene, jnp.asarray(u0, q0.dtype)))
+    problem = frozen(ScaledProblem.build(scene, jnp.asarray(u0, q0.dtype)))
     y = problem.aligned(jax.lax.stop_gradient(q0) / problem.sigma, 1e-10, keep=moving)
     return q0 + jax.lax.stop_gradient(problem.sigma * y - q0)
 

@@ -13,6 +13,7 @@ import optimistix as optx
 from jaxtyping import Array, Bool, Float, Int
 
 from .._config import MATMUL_PRECISION
+from .._model.inputs import frozen
 from .._model.rotation import matvec3
 from .._model.scene import Scene, normalise_sites
 from .._statics.equilibrium import solve_equilibrium
@@ -123,8 +124,8 @@ def _equilibrium(scene, u, q0, options):
     dtype = q_star.dtype
     sigma = scene.coordinate_scale(dtype)
     row = 1.0 / (scene.elastic_stiffness_diagonal(dtype) * sigma)
-    frozen = jax.lax.stop_gradient(scene)
-    jac = jax.jacfwd(lambda y: frozen.residual(sigma * y, u) * row)(q_star / sigma)
+    fixed = frozen(scene)
+    jac = jax.jacfwd(lambda y: fixed.residual(sigma * y, u) * row)(q_star / sigma)
     jac = jax.lax.stop_gradient(jac)
     step = sigma * jnp.linalg.solve(jac, scene.residual(q_star, u) * row)
     finite = jnp.all(jnp.isfinite(step))

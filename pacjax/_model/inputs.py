@@ -11,6 +11,14 @@ from .robot import concrete
 from .scene import Scene
 
 
+def frozen(tree):
+    """``tree`` with the gradients of its array leaves stopped. Its Python numbers stay Python
+    numbers (``jax.lax.stop_gradient`` would make them traced values inside ``jit``): a load
+    site made static by :func:`static_load_sites` must stay a knot of the kinematics, or the
+    scene's energy plan no longer matches the constants computed with it."""
+    return jtu.tree_map(lambda x: jax.lax.stop_gradient(x) if eqx.is_array(x) else x, tree)
+
+
 def check_scene(scene) -> None:
     """Raise a TypeError unless ``scene`` is a :class:`pacjax.Scene`."""
     if not isinstance(scene, Scene):

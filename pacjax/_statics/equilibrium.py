@@ -34,6 +34,7 @@ from .._model.inputs import (
     check_controls,
     check_q,
     check_scene,
+    frozen,
     solver_dtype,
     static_load_sites,
 )
@@ -94,8 +95,8 @@ def max_total_steps(opts: SolverOptions) -> int:
 def start_point(problem: "ScaledProblem", q0, opts: SolverOptions):
     """Scaled starting point ``y0 = q0 / sigma``, its straight segments' bending planes turned
     to the force (:meth:`ScaledProblem.aligned`); no derivative flows through the start."""
-    frozen = jax.lax.stop_gradient(problem)
-    return frozen.aligned(jax.lax.stop_gradient(q0) / frozen.sigma, opts.tol)
+    problem = frozen(problem)
+    return problem.aligned(jax.lax.stop_gradient(q0) / problem.sigma, opts.tol)
 
 
 def equilibrium_from(
@@ -120,11 +121,11 @@ def equilibrium_from(
 def solve_core(scene: Scene, controls, q0, opts: SolverOptions) -> Equilibrium:
     """One equilibrium (traceable; :func:`solve_equilibrium` and the batch solver wrap it)."""
     problem = ScaledProblem.build(scene, controls)
-    frozen = jax.lax.stop_gradient(problem)
+    fixed = frozen(problem)
     y0 = start_point(problem, q0, opts)
     flow_steps = jnp.asarray(0)
     if opts.method == "flow":
-        y0, flow_steps = _flow_start(frozen, y0, opts)
+        y0, flow_steps = _flow_start(fixed, y0, opts)
     solver = make_solver(scene, opts, q0.dtype)
     sol = optx.root_find(
         ScaledProblem.root_fn,
@@ -137,7 +138,7 @@ def solve_core(scene: Scene, controls, q0, opts: SolverOptions) -> Equilibrium:
         adjoint=optx.ImplicitAdjoint(linear_solver=lx.LU()),
     )
     steps = sol.stats["num_steps"] + flow_steps
-    return equilibrium_from(scene, frozen, solver, sol.value, sol.state, steps, opts.tol)
+    return equilibrium_from(scene, fixed, solver, sol.value, sol.state, steps, opts.tol)
 
 
 _solve = jit(solve_core)

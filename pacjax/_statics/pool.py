@@ -10,6 +10,7 @@ own thread (:func:`pool_lanes`); with several devices the pool is sharded along 
 import queue
 import threading
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import jax.tree_util as jtu
@@ -69,7 +70,8 @@ def _advance(scene, opts, update, controls, params, y, state, reset, y_reset, ac
         sc = scene if update is None else update(scene, p)
         problem = ScaledProblem.build(sc, u)
         solver = make_solver(sc, opts, dtype)
-        f_struct, aux_struct = jax.eval_shape(fn, y_, problem)
+        # (eqx.filter_eval_shape keeps the static load sites Python numbers, as root_find does)
+        f_struct, aux_struct = eqx.filter_eval_shape(fn, y_, problem)
         st_start = solver.init(fn, y_start, problem, None, f_struct, aux_struct, _TAGS)
         y_ = jnp.where(reset_, y_start, y_)
         st_ = jtu.tree_map(lambda a, b: jnp.where(reset_, a, b), st_start, st_)
