@@ -14,8 +14,19 @@ PACKAGE = pathlib.Path(__file__).resolve().parent.parent / "pacjax"
 #: its own group or of a lower layer; the groups of one layer are independent of each other
 #: (``_identify`` and ``_inverse`` are separate workflows).
 LAYERS = (
-    # foundations: numerical configuration, jit, result codes, a root finder, old module paths
-    (("pacjax._config", "pacjax._jit", "pacjax._results", "pacjax._chord", "pacjax._deprecated"),),
+    # foundations: float64 at import, numerical configuration, jit, the compilation cache, result
+    # codes, a root finder, old module paths
+    (
+        (
+            "pacjax._x64",
+            "pacjax._config",
+            "pacjax._jit",
+            "pacjax._cache",
+            "pacjax._results",
+            "pacjax._chord",
+            "pacjax._deprecated",
+        ),
+    ),
     # physics: strain fields, kinematics, the body, tendons, loads, their energies
     (
         (

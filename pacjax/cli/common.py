@@ -9,8 +9,6 @@ import sys
 import time
 
 import click
-import equinox as eqx
-import jax
 import numpy as np
 
 import pacjax as pj
@@ -29,13 +27,14 @@ __all__ = [
 
 
 def timed_solve(scene, controls, **options):
+    import jax
+
     start = time.perf_counter()
     eq = pj.solve_equilibrium(scene, controls, **options)
     jax.block_until_ready(eq)
     return eq, time.perf_counter() - start
 
 
-@eqx.filter_jit
 def solver_options(extra: dict) -> pj.SolverOptions:
     """The scene file's ``[solver]`` table as :class:`pacjax.SolverOptions` (its ``fallback``
     is an argument of the single and batched solves, not an option of the workflows)."""

@@ -8,7 +8,6 @@ import sys
 import time
 
 import click
-import jax
 import numpy as np
 
 import pacjax as pj
@@ -255,6 +254,8 @@ def inverse(
 def _solve_targets(scene_file: str, scene, targets: np.ndarray, independent: bool, options):
     """``(result per target, seconds)``: every target from fresh starts, or the rows as a path
     (:func:`pacjax.track`, each warm-started from the previous one)."""
+    import jax
+
     start = time.perf_counter()
     try:
         if independent:

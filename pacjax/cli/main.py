@@ -15,11 +15,14 @@
 - ``pacjax bench [--batch 1,100] [--models PAC] [--dtypes float64,float32] [--json F] [--md F]``:
   equilibria per second of the paper's robot (see :mod:`pacjax.cli.bench`).
 
-Compiling a solver dominates a first run (tens of seconds); JAX's persistent compilation cache
-(``~/.cache/pacjax-jax``, or ``$PACJAX_CACHE_DIR``; ``PACJAX_CACHE_DIR=off`` disables it) keeps
-compiled solvers between runs. User errors (missing or malformed files, wrong number of
-controls) print one line and exit with status 1 (2 for usage errors), without a traceback;
-``solve`` exits with status 3 when the solver did not converge (after writing its results).
+Compiling a solver dominates a first run; JAX's persistent compilation cache (a folder per jaxlib
+and processor under ``~/.cache/pacjax-jax``, or ``$PACJAX_CACHE_DIR``; ``PACJAX_CACHE_DIR=off``
+disables it; see :mod:`pacjax._cache`) keeps compiled solvers between runs. The command line
+imports JAX only when a command runs, so ``--help`` and usage errors answer at once.
+
+User errors (missing or malformed files, wrong number of controls) print one line and exit with
+status 1 (2 for usage errors), without a traceback; ``solve`` exits with status 3 when the
+solver did not converge (after writing its results).
 """
 
 from __future__ import annotations
@@ -28,11 +31,11 @@ import os
 import sys
 
 import click
-import jax
 import numpy as np
 
 import pacjax as pj
 
+from .. import _cache
 from .common import (
     float_or_none,
     load_with_controls,
@@ -53,22 +56,14 @@ DEMO_COMMANDS = {
     "all contracted": (0.03,) * 9,
     "combined": (0.045, 0.01, 0.01, 0.0, 0.035, 0.0, 0.01, 0.01, 0.04),
 }
-DEMO_MODELS = {"PCC": pj.PCC, "PAC": pj.PAC}
-
-
-def _enable_compilation_cache() -> None:
-    cache = os.environ.get("PACJAX_CACHE_DIR", os.path.join("~", ".cache", "pacjax-jax"))
-    if cache.lower() in ("", "off", "none", "0"):
-        return
-    jax.config.update("jax_compilation_cache_dir", os.path.expanduser(cache))
-    jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
+DEMO_MODELS = ("PCC", "PAC")
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(pj.__version__, prog_name="pacjax")
 def cli():
     """Statics of tendon-driven continuum robots: PCC, PAC and polynomial curvature."""
-    _enable_compilation_cache()
+    _cache.enable_from_environment()
 
 
 def main() -> None:
@@ -107,8 +102,8 @@ def _solve_demo(tip_mass: float):
     groups: dict[str, dict] = {name: {} for name in DEMO_COMMANDS}
     bar = progress(2 * len(DEMO_COMMANDS) * len(DEMO_MODELS), "demo")
     with bar:
-        for model_name, model in DEMO_MODELS.items():
-            scene = pj.presets.stella2023(model(), tip_mass=tip_mass)
+        for model_name in DEMO_MODELS:
+            scene = pj.presets.stella2023(getattr(pj, model_name)(), tip_mass=tip_mass)
             for i, (command, controls) in enumerate(DEMO_COMMANDS.items()):
                 bar.set_postfix_str(
                     f"{model_name}: {'compiling' if i == 0 else command}", refresh=True

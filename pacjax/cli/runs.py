@@ -9,7 +9,6 @@ import sys
 import time
 
 import click
-import jax
 import numpy as np
 
 import pacjax as pj
@@ -65,6 +64,8 @@ def simulate(
     out: str,
 ):
     """Simulate the dynamics of a TOML scene file after a step in commands."""
+    import jax
+
     from ..plots import animation
 
     scene, u, extra = load_with_controls(scene_file, controls)
