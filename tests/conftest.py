@@ -1,22 +1,30 @@
-"""Shared test set-up: float64, an opt-in persistent compilation cache, and shared scenes."""
+"""Shared test set-up: float64, a persistent compilation cache for the suite, and freeing
+compiled code between modules."""
 
 import gc
 import os
+import pathlib
 
-import jax
-import pytest
+# Before JAX starts: a worker of a parallel run (pytest-xdist) shares the accelerator with the
+# others, so none may take most of its memory up front.
+if "PYTEST_XDIST_WORKER" in os.environ:
+    os.environ.setdefault("XLA_PYTHON_CLIENT_PREALLOCATE", "false")
 
-import pacjax  # noqa: F401  (switches on float64)
+import jax  # noqa: E402
+import pytest  # noqa: E402
 
-# Opt-in only (`PACJAX_CACHE_DIR=~/.cache/pacjax-jax pytest`): re-runs on a developer's machine
-# then reuse compiled solvers. CI leaves it off: loading a cached XLA:CPU executable written by
-# an earlier pytest process aborted the CI's slow step (SIGABRT inside
-# compilation_cache.get_executable_and_time), and a fresh CI checkout gains nothing from it.
-# The CLI, invoked in-process by the CLI tests, reads the same variable: "off" keeps it off too.
-_cache = os.environ.setdefault("PACJAX_CACHE_DIR", "off")
-if _cache.lower() not in ("", "off", "none", "0"):
-    jax.config.update("jax_compilation_cache_dir", os.path.expanduser(_cache))
-    jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
+import pacjax  # noqa: E402, F401  (switches on float64)
+from pacjax import _cache  # noqa: E402
+
+# Compiled programs are kept on disk in the checkout (pacjax's cache: a folder per jaxlib and
+# processor, so that nothing compiled elsewhere is read): test modules, parallel workers and
+# CI's two steps that solve the same scene structures load them instead of compiling again.
+# PACJAX_CACHE_DIR=DIR moves it, PACJAX_CACHE_DIR=off turns it off. The command line, invoked
+# in-process by the CLI tests, reads the same variable.
+os.environ.setdefault(
+    "PACJAX_CACHE_DIR", str(pathlib.Path(__file__).resolve().parent.parent / ".pytest-jax-cache")
+)
+_cache.enable_from_environment()
 
 
 @pytest.fixture(autouse=True, scope="module")
@@ -25,7 +33,8 @@ def _free_compiled_code():
 
     A module compiles its own scenes' solvers; kept until the end of the run they grew the
     pytest process past 5 GB, and a later large compilation (the Hessian of the kinematics)
-    aborted inside XLA in CI's slow step. Modules sharing a scene structure recompile it.
+    aborted inside XLA in CI's slow step. Modules sharing a scene structure load it again from
+    the compilation cache.
     """
     yield
     jax.clear_caches()

@@ -231,6 +231,7 @@ def test_jit_vmap_agree_with_single_solves_and_compile_once(reference):
             np.testing.assert_allclose(batch.q[0], eq.q, rtol=1e-6, atol=1e-12)
 
 
+@pytest.mark.slow  # shares _solve_batch's minute of compilation with the test above
 def test_non_finite_controls_inside_jit_are_reported_not_converged():
     """Inside jit the NaN cannot be rejected up front: the solve must say it failed."""
     scene, _ = _build(BASE_PARAMS)

@@ -780,6 +780,13 @@ def test_order_step_maps_are_exact(twist):
     assert order_step(pj.Scene(pj.Robot([segment]), pj.PAC())) is None
 
 
+# Jitted once per problem structure (a lambda jitted inside the loop compiled at every pass).
+_linearise = eqx.filter_jit(lambda p, x: p.linearise(x))
+_autodiff_linearisation = eqx.filter_jit(
+    lambda p, x: (jax.jacfwd(p.residual)(x), p.residual(x), p.energy(x))
+)
+
+
 @pytest.mark.parametrize(
     "model", [pj.PAC(), pj.PCC(frame="paper"), pj.PolynomialCurvature(2)], ids=repr
 )
@@ -803,10 +810,8 @@ def test_follower_force_jacobian_as_dead_force_plus_turning_is_the_autodiff_one(
     rng = np.random.default_rng(5)
     for scale in (0.3, 3.0):
         y = jnp.asarray(rng.normal(size=scene.n_dofs)) * scale
-        jac, (r, (merit, _)) = eqx.filter_jit(lambda p, x: p.linearise(x))(problem, y)
-        expected, residual, energy = eqx.filter_jit(
-            lambda p, x: (jax.jacfwd(p.residual)(x), p.residual(x), p.energy(x))
-        )(problem, y)
+        jac, (r, (merit, _)) = _linearise(problem, y)
+        expected, residual, energy = _autodiff_linearisation(problem, y)
         r_scale = float(jnp.max(jnp.abs(residual)))
         np.testing.assert_allclose(r, residual, rtol=0, atol=1e-14 * r_scale)
         assert float(merit) == pytest.approx(float(energy), rel=1e-12)
@@ -825,12 +830,7 @@ def test_plane_frame_derivatives_are_the_autodiff_ones(model):
     integral; with an empty padding interval at the end."""
     import jax.tree_util as jtu
 
-    from pacjax._model.kinematics import (
-        _INTERVAL_NODES,
-        segment_knot_curvature,
-        segment_knot_frames,
-        segment_knot_jacobian,
-    )
+    from pacjax._model.kinematics import _INTERVAL_NODES, segment_knot_frames
 
     rng = np.random.default_rng(0)
     inner = np.sort(rng.uniform(0.0, 1.0, 9))
@@ -843,27 +843,41 @@ def test_plane_frame_derivatives_are_the_autodiff_ones(model):
             np.concatenate([rng.normal(0.0, bend, d - 2), [rng.uniform(-3, 3)], [0.004]])
         )
         for node_weights in (weights, None):
-
-            def frames(y, node_weights=node_weights):
-                return segment_knot_frames(model, y, length, knots, node_weights)
-
-            value = frames(q)
-            jac, val = segment_knot_jacobian(model, q, length, knots, node_weights)
+            shapes = jax.eval_shape(segment_knot_frames, model, q, length, knots, node_weights)
+            lam = jtu.tree_map(lambda x: jnp.asarray(rng.normal(size=x.shape)), shapes)
+            value, val, jac, jac_ad, hess, hess_ad = _knot_frame_derivatives(
+                model, q, length, knots, node_weights, lam
+            )
             for got, want in zip(jtu.tree_leaves(val), jtu.tree_leaves(value), strict=True):
                 np.testing.assert_array_equal(got, want)
-            jac_ad = jax.jacfwd(frames)(q)
             for got, want in zip(jtu.tree_leaves(jac), jtu.tree_leaves(jac_ad), strict=True):
                 np.testing.assert_allclose(got, want, rtol=0, atol=1e-14 * np.abs(want).max())
-            lam = jtu.tree_map(lambda x: jnp.asarray(rng.normal(size=x.shape)), value)
-
-            def pull(y, lam=lam, frames=frames):
-                pairs = zip(jtu.tree_leaves(lam), jtu.tree_leaves(frames(y)), strict=True)
-                return sum(jnp.sum(a * b) for a, b in pairs)
-
-            hess_ad = jax.hessian(pull)(q)
-            hess = segment_knot_curvature(model, q, length, knots, node_weights, lam)
             assert np.abs(hess_ad).max() > 0
             np.testing.assert_allclose(hess, hess_ad, rtol=0, atol=1e-14 * np.abs(hess_ad).max())
+
+
+@eqx.filter_jit
+def _knot_frame_derivatives(model, q, length, knots, node_weights, lam):
+    """The knot frames, and their first and second derivatives both written out and by
+    autodiff, in one program (compiled once per model and weighting, not op by op)."""
+    import jax.tree_util as jtu
+
+    from pacjax._model.kinematics import (
+        segment_knot_curvature,
+        segment_knot_frames,
+        segment_knot_jacobian,
+    )
+
+    def frames(y):
+        return segment_knot_frames(model, y, length, knots, node_weights)
+
+    def pull(y):
+        pairs = zip(jtu.tree_leaves(lam), jtu.tree_leaves(frames(y)), strict=True)
+        return sum(jnp.sum(a * b) for a, b in pairs)
+
+    jac, val = segment_knot_jacobian(model, q, length, knots, node_weights)
+    hess = segment_knot_curvature(model, q, length, knots, node_weights, lam)
+    return frames(q), val, jac, jax.jacfwd(frames)(q), hess, jax.hessian(pull)(q)
 
 
 @pytest.mark.parametrize(
