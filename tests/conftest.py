@@ -1,6 +1,7 @@
 """Shared test set-up: float64, a persistent compilation cache for the suite, and freeing
 compiled code between modules."""
 
+import collections
 import gc
 import os
 import pathlib
@@ -39,3 +40,17 @@ def _free_compiled_code():
     yield
     jax.clear_caches()
     gc.collect()
+
+
+@pytest.hookimpl(trylast=True)  # after the -m selection: weigh only the tests that will run
+def pytest_collection_modifyitems(config, items):
+    """Longest files first. A parallel run hands out whole files in collection order
+    (``--dist loadfile --no-loadscope-reorder``); a study of minutes left for the end keeps one
+    worker busy while the others idle. A file's weight is the sum of its tests'
+    ``long(minutes=...)`` estimates (minutes on 2 cores, for this ordering only)."""
+    weight = collections.Counter()
+    for item in items:
+        mark = item.get_closest_marker("long")
+        if mark is not None:
+            weight[item.path] += mark.kwargs.get("minutes", 1.0)
+    items.sort(key=lambda item: -weight[item.path])

@@ -43,6 +43,7 @@ def test_gradient_with_respect_to_damping_matches_finite_differences():
     assert abs(grad - fd) < 1e-4 * abs(fd)
 
 
+@pytest.mark.long(minutes=5)
 @pytest.mark.slow
 def test_gradient_of_a_small_trajectory_matches_finite_differences():
     """The same on the smallest scene with everything the damping enters: one

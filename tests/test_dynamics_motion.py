@@ -18,6 +18,7 @@ from pacjax import dynamics as dyn
 from pacjax._model.inertia import kinetic_energy, mass_matrix
 
 
+@pytest.mark.long(minutes=1.6)
 @pytest.mark.slow  # 330 s on 2 cores beside another job
 def test_damped_motion_settles_on_equilibrium():
     eq = pj.solve_equilibrium(SCENE, CONTROLS, tol=1e-12)
@@ -37,6 +38,7 @@ def test_damped_motion_settles_on_equilibrium():
     assert float(jnp.max(jnp.abs(traj.qdot[-1]))) < 1e-5
 
 
+@pytest.mark.long(minutes=2.3)
 @pytest.mark.slow  # under 4 min on 2 cores (2026-11-27)
 def test_energy_is_conserved_over_100_periods():
     scene = free_scene()

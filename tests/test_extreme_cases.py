@@ -279,6 +279,7 @@ def test_random_extreme_scenes_never_return_silent_nan(ei, gain, mass, g, mount,
     _assert_explicit(eq, grad, TOLS[dtype])
 
 
+@pytest.mark.long(minutes=0.9)
 def test_structured_jacobian_of_a_non_conservative_scene_is_the_autodiff_one():
     """The solver's Jacobian of a scene with a follower force and a local moment: structured
     Hessian of the energy minus the forward derivative of those loads alone, equal to
@@ -310,6 +311,7 @@ def test_structured_jacobian_of_a_non_conservative_scene_is_the_autodiff_one():
     assert float(jnp.max(jnp.abs(jac - expected))) < 1e-10 * scale
 
 
+@pytest.mark.long(minutes=1.2)
 def test_follower_force_is_reached_by_load_continuation():
     # The paper's single section with a 3.41 N follower force along the body at the tip and
     # random pull-ins: from the straight start, the residual-norm merit of a non-conservative
@@ -369,6 +371,7 @@ def _poly_follower(order):
     return pj.presets.stella2023(pj.PolynomialCurvature(order), loads=(force,))
 
 
+@pytest.mark.long(minutes=1.3)
 def test_order_continuation_reaches_a_row_the_straight_start_misses():
     """The paper's robot with ``PolynomialCurvature(3)`` under a 3.41 N tip follower force:
     row 16 of ``random_commands(24, seed=1)`` stalls from the straight start at a scaled

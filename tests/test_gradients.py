@@ -199,6 +199,7 @@ def test_jacfwd_of_equilibrium_matches_finite_differences(reference):
     assert max(errors.values()) < 1e-6, errors
 
 
+@pytest.mark.long(minutes=1.1)
 @pytest.mark.slow  # over a minute of compilation: CI's slow step
 def test_jit_vmap_agree_with_single_solves_and_compile_once(reference):
     eq, _, _ = reference

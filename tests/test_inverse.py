@@ -65,6 +65,7 @@ def test_default_command_range():
     np.testing.assert_allclose(LOWER, 0.0)
 
 
+@pytest.mark.long(minutes=1.7)
 def test_reachable_targets_are_reached(targets):
     _, points = targets
     for point in points:
@@ -233,6 +234,7 @@ def test_batch_starts_follow_the_workspace_order(monkeypatch):
     np.testing.assert_allclose(np.asarray(out.controls[0]), controls[1])
 
 
+@pytest.mark.long(minutes=1.1)
 def test_pose_target(targets):
     """A reachable tip pose. Levenberg-Marquardt first stops 2.7 mm short with two tendons
     slack (their Jacobian columns are zero; before the retry, all 4 starts ended there); the
@@ -246,6 +248,7 @@ def test_pose_target(targets):
     np.testing.assert_allclose(res.rotation, rotation, atol=2e-2)
 
 
+@pytest.mark.long(minutes=1.0)
 def test_marker_targets(targets):
     commands, _ = targets
     sites = [(0, 1.0), (1, 0.5), (1, 1.0)]
@@ -258,6 +261,7 @@ def test_marker_targets(targets):
     np.testing.assert_allclose(reached[[0, 2]], points[[0, 2]], atol=1e-4)
 
 
+@pytest.mark.long(minutes=2.2)
 def test_batch_matches_single_and_tension_limit(targets):
     _, points = targets
     batch = np.concatenate([points, [[0.0, 0.05, -0.5]]])

@@ -790,6 +790,7 @@ _autodiff_linearisation = eqx.filter_jit(
 @pytest.mark.parametrize(
     "model", [pj.PAC(), pj.PCC(frame="paper"), pj.PolynomialCurvature(2)], ids=repr
 )
+@pytest.mark.long(minutes=0.8)
 def test_follower_force_jacobian_as_dead_force_plus_turning_is_the_autodiff_one(model):
     """Follower forces only: the Jacobian from the dead-force Hessian plus the turning of the
     forces (``follower_jacobian``) equals ``jax.jacfwd`` of the residual, and the residual and

@@ -127,6 +127,7 @@ def test_deprecated_trajectory_success_and_report_converged():
         assert not report.converged
 
 
+@pytest.mark.long(minutes=1.4)
 @pytest.mark.slow
 def test_each_workflow_reports_a_result():
     """A real inverse solve, a tracked path, a simulation and a fit, each with ``.result`` in
