@@ -44,10 +44,12 @@ def _free_compiled_code():
 
 @pytest.hookimpl(trylast=True)  # after the -m selection: weigh only the tests that will run
 def pytest_collection_modifyitems(config, items):
-    """Longest files first. A parallel run hands out whole files in collection order
-    (``--dist loadfile --no-loadscope-reorder``); a study of minutes left for the end keeps one
+    """Longest files first. With ``--no-loadscope-reorder`` (CI's slow step) a parallel run
+    hands out whole files in collection order; a study of minutes left for the end keeps one
     worker busy while the others idle. A file's weight is the sum of its tests'
-    ``long(minutes=...)`` estimates (minutes on 2 cores, for this ordering only)."""
+    ``long(minutes=...)`` estimates (minutes on 2 cores, for this ordering only). Without it
+    (the default step, many short files) pytest-xdist hands out the files with most tests
+    first."""
     weight = collections.Counter()
     for item in items:
         mark = item.get_closest_marker("long")
