@@ -8,11 +8,12 @@ see :mod:`pacjax._x64`.
 
 import importlib
 
+from . import _deprecated, _x64  # standard library only
+
 __version__ = "0.1.0"
 
-from . import _x64
-
 _x64.request()
+_deprecated.install()
 
 #: Public name -> the module that defines it (relative to this package).
 _PUBLIC = {
@@ -82,8 +83,3 @@ def __getattr__(name: str):
 
 def __dir__():
     return sorted({*globals(), *__all__})
-
-
-from . import _deprecated  # noqa: E402  (stdlib only)
-
-_deprecated.install()
