@@ -128,19 +128,19 @@ def _child(entry: str, robot: str, data_dir: str, cache: str | None) -> dict:
     else:
         pj.Scene  # noqa: B018  (the first attribute imports JAX)
     import_s = time.perf_counter() - start
-    import jax
-
     call = _call(entry, robot, data_dir)
     programs = _listen_to_compilations()
-    timings = []
-    for _ in range(2):
-        t = time.perf_counter()
-        jax.block_until_ready(call())
-        timings.append(time.perf_counter() - t)
-        if not timings[1:]:
-            first = dict(programs)
-    row = {"import_s": import_s, "first_s": timings[0], "warm_s": timings[1]}
-    return row | _summarise(first)
+    first_s = _timed(call)
+    first = _summarise(programs)  # before the warm call adds nothing, or a recompilation
+    return {"import_s": import_s, "first_s": first_s, "warm_s": _timed(call)} | first
+
+
+def _timed(call) -> float:
+    import jax
+
+    t = time.perf_counter()
+    jax.block_until_ready(call())
+    return time.perf_counter() - t
 
 
 #: JAX's monitoring events of a compilation (seconds, per jitted function).

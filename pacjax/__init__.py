@@ -69,14 +69,13 @@ __all__ = sorted([*_PUBLIC, *_SUBMODULES, "__version__"])
 
 
 def __getattr__(name: str):
-    if name in _PUBLIC:
-        importlib.import_module("._config", __name__)
-        value = getattr(importlib.import_module(_PUBLIC[name], __name__), name)
-    elif name in _SUBMODULES:
-        importlib.import_module("._config", __name__)
-        value = importlib.import_module(f".{name}", __name__)
-    else:
+    if name not in _PUBLIC and name not in _SUBMODULES:
         raise AttributeError(f"module 'pacjax' has no attribute {name!r}")
+    importlib.import_module("._config", __name__)  # JAX up, float64 on, before any pacjax module
+    if name in _PUBLIC:
+        value = getattr(importlib.import_module(_PUBLIC[name], __name__), name)
+    else:
+        value = importlib.import_module(f".{name}", __name__)
     globals()[name] = value
     return value
 

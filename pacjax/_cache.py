@@ -16,8 +16,8 @@ executable of thousands of kernels overflowed a fixed-size linker thread stack o
 (reported by other JAX users), and such a crash is a signal, not an exception. The cache is
 therefore opt-in for library users, and entries are only written for programs that took at least
 ``min_compile_time_s`` to compile. A run that crashed while loading from the cache can be
-repeated with ``PACJAX_CACHE_DIR=off`` (the command line) or without the call; :func:`clear`
-empties the directory.
+repeated with ``PACJAX_CACHE_DIR=off`` (the command line) or without the call; deleting the
+directory empties it.
 
 This module imports only the standard library: the command line enables the cache before JAX
 is imported, through the environment variables JAX reads as it starts.
@@ -29,7 +29,6 @@ import hashlib
 import importlib.metadata
 import os
 import platform
-import shutil
 import sys
 from pathlib import Path
 
@@ -107,8 +106,3 @@ def enable_from_environment() -> Path | None:
     except OSError as err:
         print(f"pacjax: compilation cache off ({err})", file=sys.stderr)
         return None
-
-
-def clear(root: str | os.PathLike | None = None) -> None:
-    """Delete every cache under ``root`` (default ``~/.cache/pacjax-jax``)."""
-    shutil.rmtree(Path(root if root is not None else DEFAULT_ROOT).expanduser(), True)
