@@ -285,11 +285,12 @@ def segment_knot_frames(
     nodes, weights = gauss_legendre(_INTERVAL_NODES)
     nodes = jnp.asarray(nodes, dtype)
     n_int = a.shape[0]
-    closed = model.plane_frames(q, knots)
+    s_nodes = a[:, None] + h[:, None] * nodes[None, :]
+    closed = model.plane_frames(q, jnp.concatenate([knots, s_nodes.reshape(-1)]))
     if closed is not None:
         # One bending plane: closed-form frames, no Magnus steps and no chained products.
-        rots = closed[0]
-        _, tangents = model.plane_frames(q, a[:, None] + h[:, None] * nodes[None, :])
+        k = knots.shape[0]
+        rots, tangents = closed[0][:k], closed[1][k:].reshape(s_nodes.shape + (3,))
         return _knot_positions(model, q, length, h, weights, rots, tangents, node_weights)
     # Magnus vectors of every interval and of [a, node] for every position node, in one vmap.
     starts = jnp.concatenate([a, jnp.repeat(a, len(nodes))])
@@ -352,6 +353,14 @@ def _plane_points(model, q, knots):
     )
 
 
+def _knots_and_nodes(model, theta_k, theta_n, phi, order: int):
+    """:meth:`pacjax._model.strain.PlanarCurvature.plane_rotation_jet` at the knots and at the
+    position nodes, in one evaluation."""
+    k = theta_k.shape[0]
+    jet = model.plane_rotation_jet(jnp.concatenate([theta_k, theta_n.reshape(-1)]), phi, order)
+    return [r[:k] for r in jet], [r[k:].reshape(theta_n.shape + (3, 3)) for r in jet]
+
+
 def _angle_jacobian(basis):
     """``d (theta, phi) / d q`` at each point (``(*p, 2, d)``) from ``d theta / d q[:m]``."""
     m = basis.shape[-1]
@@ -378,15 +387,10 @@ def segment_knot_jacobian(
     phi = q[-2]
     (theta_k, basis_k), (theta_n, basis_n), h, weights = _plane_points(model, q, knots)
 
-    def point(theta):
-        def rt(x):
-            return model.plane_rotation_tangent(x[0], x[1])
-
-        jac, val = jax.jacfwd(lambda x: (rt(x), rt(x)), has_aux=True)(jnp.stack([theta, phi]))
-        return jac, val
-
-    (d_rot, _), (rots, _) = jax.vmap(point)(theta_k)
-    (_, d_tan), (_, tangents) = jax.vmap(jax.vmap(point))(theta_n)
+    knot_jet, node_jet = _knots_and_nodes(model, theta_k, theta_n, phi, order=1)
+    rots, d_rot = knot_jet[0], jnp.stack(knot_jet[1:], axis=-1)
+    tangents, tan_t, tan_p = (r[..., :, 2] for r in node_jet)
+    d_tan = jnp.stack([tan_t, tan_p], axis=-1)
     # Chain rule through (theta, phi)(q).
     d_rot = jnp.einsum(
         "kija,kad->kijd", d_rot, _angle_jacobian(basis_k), precision=MATMUL_PRECISION
@@ -432,20 +436,15 @@ def segment_knot_curvature(
         beta = beta + node_weights[:, :, None] * lam_moment
     beta = (h[:, None] * w[None, :])[:, :, None] * beta
 
-    def rot_term(theta, lam_k):
-        f = lambda x: jnp.sum(lam_k * model.plane_rotation_tangent(x[0], x[1])[0])  # noqa: E731
-        return jax.hessian(f)(jnp.stack([theta, phi]))
+    def symmetric(tt, tp, pp):
+        return jnp.stack([jnp.stack([tt, tp], -1), jnp.stack([tp, pp], -1)], -2)
 
-    def tan_term(theta, beta_p):
-        def f(x):
-            rotation_tangent = model.plane_rotation_tangent(x[0], x[1])[1]
-            return jnp.dot(beta_p, rotation_tangent, precision=MATMUL_PRECISION)
-
-        x = jnp.stack([theta, phi])
-        return jax.hessian(f)(x), jax.grad(f)(x)
-
-    h_rot = jax.vmap(rot_term)(theta_k, lam_rot)
-    h_tan, g_tan = jax.vmap(jax.vmap(tan_term))(theta_n, beta)
+    # lam . R and beta . (R e_z), differentiated twice along (theta, phi) point by point.
+    rot_jet, tangent_jet = _knots_and_nodes(model, theta_k, theta_n, phi, order=2)
+    h_rot = symmetric(*(jnp.sum(lam_rot * r, axis=(-2, -1)) for r in rot_jet[3:]))
+    tan_jet = [jnp.sum(beta * r[..., :, 2], axis=-1) for r in tangent_jet]
+    h_tan = symmetric(*tan_jet[3:])
+    g_tan = jnp.stack(tan_jet[1:3], axis=-1)
     a_k = _angle_jacobian(basis_k)
     a_n = _angle_jacobian(basis_n)
     ell = length + model.elongation(q)

@@ -21,7 +21,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 from .._config import MATMUL_PRECISION
-from .rotation import rot_z
+from .rotation import hat, rot_z
 
 _FRAMES = ("torsion_free", "paper")
 
@@ -114,6 +114,20 @@ def _check_frame(frame: str) -> None:
         raise ValueError(f"frame must be one of {_FRAMES}, got {frame!r}")
 
 
+def _angle_coefficients(theta, order: int) -> Float[Array, "n *p 3"]:
+    """``(1, sin t, 1 - cos t)`` at ``t = theta`` and its derivatives up to ``order``."""
+    st, ct = jnp.sin(theta), jnp.cos(theta)
+    one, zero = jnp.ones_like(theta), jnp.zeros_like(theta)
+    # 1 - cos t as 2 sin^2(t / 2), which keeps its relative precision near straight.
+    vers = 2.0 * jnp.sin(0.5 * theta) ** 2
+    rows = [(one, st, vers), (zero, ct, st), (zero, -st, ct)]
+    return jnp.stack([jnp.stack(r, axis=-1) for r in rows[: order + 1]])
+
+
+def _matrix(rows) -> Float[Array, "3 3"]:
+    return jnp.stack([jnp.stack(r) for r in rows])
+
+
 class PlanarCurvature(StrainModel):
     """Curvature polynomial ``c(s)`` in a bending plane at angle ``phi``: PCC and PAC."""
 
@@ -161,25 +175,62 @@ class PlanarCurvature(StrainModel):
     ) -> tuple[Float[Array, "*p 3 3"], Float[Array, "*p 3"]]:
         """Rotation (base rotation included) and tangent ``R e_z`` at bending angle ``theta``
         in the plane at angle ``phi``."""
-        # The strain keeps the axis (-sin phi, cos phi, 0), so the frame is a rotation by
-        # theta(s) about it: R = Rz(phi) Ry(theta) Rz(-phi), or the paper's Rz(phi) Ry(theta).
-        ct, st = jnp.cos(theta), jnp.sin(theta)
+        (rot,) = self.plane_rotation_jet(theta, phi, order=0)
+        return rot, rot[..., :, 2]
+
+    def plane_rotation_jet(
+        self, theta: Float[Array, "*p"], phi: Float[Array, ""], order: int
+    ) -> tuple[Float[Array, "*p 3 3"], ...]:
+        """The rotation at ``(theta, phi)`` and its partial derivatives up to ``order`` (0-2):
+        ``(R,)``, then ``R_theta, R_phi``, then ``R_theta_theta, R_theta_phi, R_phi_phi``.
+
+        ``R = B0(phi) + sin(theta) B1(phi) + (1 - cos theta) B2(phi)``
+        (:meth:`rotation_basis`), so each derivative is three matrices per segment weighted by
+        three numbers per point. Differentiating the matrix entries by automatic
+        differentiation instead was a quarter of the solver's traced program (PAC).
+        """
+        basis = self.rotation_basis(phi, order)
+        trig = _angle_coefficients(theta, order)  # (order + 1, *p, 3)
+
+        def combine(n, m):  # d^n / d theta^n d^m / d phi^m
+            return jnp.sum(trig[n][..., :, None, None] * basis[m], axis=-3)
+
+        pairs = ((0, 0), (1, 0), (0, 1), (2, 0), (1, 1), (0, 2))
+        return tuple(combine(n, m) for n, m in pairs[: (order + 1) * (order + 2) // 2])
+
+    def rotation_basis(self, phi: Float[Array, ""], order: int) -> Float[Array, "m 3 3 3"]:
+        """``B[m, j]``: the ``m``-th derivative along ``phi`` (``m <= order``) of the matrix
+        ``B_j`` of :meth:`plane_rotation_jet`."""
         cp, sp = jnp.cos(phi), jnp.sin(phi)
-        zero = jnp.zeros_like(theta)
-        tangent = jnp.stack([cp * st, sp * st, ct], axis=-1)
+        zero, one = jnp.zeros_like(cp), jnp.ones_like(cp)
         if self.frame == "paper":
-            rows = [[cp * ct, -sp + zero, cp * st], [sp * ct, cp + zero, sp * st], [-st, zero, ct]]
-        else:
-            # Rz(phi) Ry(theta) Rz(-phi), with (cos theta - 1) written as -2 sin^2(theta / 2)
-            # so that it keeps its relative precision near the straight configuration.
-            vers = -2.0 * jnp.sin(0.5 * theta) ** 2
-            rows = [
-                [1.0 + cp * cp * vers, cp * sp * vers, cp * st],
-                [cp * sp * vers, 1.0 + sp * sp * vers, sp * st],
-                [-cp * st, -sp * st, ct],
-            ]
-        rot = jnp.stack([jnp.stack(r, axis=-1) for r in rows], axis=-2)
-        return rot, tangent
+            # Rz(phi) Ry(theta), with Ry(theta) = I + sin(theta) S + (1 - cos theta) S^2 and
+            # S = [e_y]x; the m-th derivative of Rz(phi) turns its xy block by m quarter turns.
+            xy = [(cp, -sp, sp, cp), (-sp, -cp, cp, -sp), (-cp, sp, -sp, -cp)]
+            bases = []
+            for m in range(order + 1):
+                a, b, c, d = xy[m]
+                corner = one if m == 0 else zero
+                rz = _matrix([[a, b, zero], [c, d, zero], [zero, zero, corner]])
+                # Rz S = (-Rz e_z, 0, Rz e_x) and Rz S^2 = -(Rz e_x, 0, Rz e_z), by columns.
+                col_x, col_z, col_0 = rz[:, 0], rz[:, 2], jnp.zeros_like(rz[:, 0])
+                rz_s = jnp.stack([-col_z, col_0, col_x], axis=-1)
+                rz_s2 = jnp.stack([-col_x, col_0, -col_z], axis=-1)
+                bases.append(jnp.stack([rz, rz_s, rz_s2]))
+            return jnp.stack(bases)
+        # Rz(phi) Ry(theta) Rz(-phi) = I + sin(theta) K + (1 - cos theta) K^2: the rotation by
+        # theta about a = (-sin phi, cos phi, 0), K = [a]x, K^2 = a a^T - I.
+        a = jnp.stack([-sp, cp, zero])
+        da = jnp.stack([-cp, -sp, zero])
+        eye = jnp.eye(3, dtype=cp.dtype)
+        bases = [jnp.stack([eye, hat(a), jnp.outer(a, a) - eye])]
+        if order >= 1:
+            d_sq = jnp.outer(da, a) + jnp.outer(a, da)
+            bases.append(jnp.stack([0.0 * eye, hat(da), d_sq]))
+        if order >= 2:
+            dd_sq = 2.0 * (jnp.outer(da, da) - jnp.outer(a, a))
+            bases.append(jnp.stack([0.0 * eye, -hat(a), dd_sq]))
+        return jnp.stack(bases)
 
     def strain(self, q, s):
         c = self._curvature(q, s)
