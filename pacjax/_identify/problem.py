@@ -161,13 +161,12 @@ def _frame_jacobian(problem, theta, q, controls, row, meas, mask, rmeas, rmask):
         return scene.residual(q_, controls)
 
     def residual(th, q_):
-        return _frame_residual(problem, th, q_, controls, row, meas, mask, rmeas, rmask)
+        out = _frame_residual(problem, th, q_, controls, row, meas, mask, rmeas, rmask)
+        return out[0], out
 
-    r, pred, rpred = residual(theta, q)
-    d_theta = jax.jacfwd(lambda th: residual(th, q)[0])(theta)
-    d_q = jax.jacfwd(lambda q_: residual(theta, q_)[0])(q)
-    stiffness = jax.jacfwd(equilibrium_residual, 1)(theta, q)
-    forcing = jax.jacfwd(equilibrium_residual, 0)(theta, q)
+    # Along both arguments in one forward pass: one traced copy of each residual, not two.
+    (d_theta, d_q), (r, pred, rpred) = jax.jacfwd(residual, (0, 1), has_aux=True)(theta, q)
+    forcing, stiffness = jax.jacfwd(equilibrium_residual, (0, 1))(theta, q)
     dq = -jnp.linalg.solve(stiffness, forcing)  # implicit function theorem
     return r, d_theta + jnp.matmul(d_q, dq, precision=MATMUL_PRECISION), pred, rpred
 

@@ -13,10 +13,9 @@ import optimistix as optx
 from jaxtyping import Array, Bool, Float, Int
 
 from .._config import MATMUL_PRECISION
-from .._model.inputs import frozen
 from .._model.rotation import matvec3
 from .._model.scene import Scene, normalise_sites
-from .._statics.equilibrium import solve_equilibrium
+from .._statics.equilibrium import linearised_equilibrium
 from .._statics.options import SolverOptions
 
 #: The residual is expressed in this unit (m) so that its Jacobian with respect to the latent
@@ -109,8 +108,9 @@ def _equilibrium(scene, u, q0, options):
 
     The solve itself is not differentiated: ``q*`` is found with gradients stopped, and the
     derivative ``dq*/du = -(dF/dq)^-1 dF/du`` enters through one linearised Newton step at the
-    solution, ``q = q* - A^-1 F(q*, u)`` with ``A = dF/dq(q*)`` held constant, whose value part is
-    removed again (the step is below the solver's tolerance). That is the implicit function
+    solution, ``q = q* - A^-1 F(q*, u)`` with ``A = dF/dq(q*)`` held constant (the solver's last
+    linearisation, :func:`pacjax._statics.equilibrium.linearised_equilibrium`), whose value part
+    is removed again (the step is below the solver's tolerance). That is the implicit function
     theorem with one dense solve (``n_dofs`` is small), and it compiles far faster than
     forward-mode differentiation of the solver's own implicit adjoint, which the
     Levenberg-Marquardt Jacobians need. The system is scaled like the solver's (coordinates by
@@ -119,14 +119,11 @@ def _equilibrium(scene, u, q0, options):
 
     Returns ``(q, ok)``; ``ok`` is False for a failed or unstable solve or a singular ``A``.
     """
-    eq = solve_equilibrium(scene, jax.lax.stop_gradient(u), q0, fallback=False, options=options)
+    eq, jac = linearised_equilibrium(scene, jax.lax.stop_gradient(u), q0, options)
     q_star = jax.lax.stop_gradient(eq.q)
     dtype = q_star.dtype
     sigma = scene.coordinate_scale(dtype)
     row = 1.0 / (scene.elastic_stiffness_diagonal(dtype) * sigma)
-    fixed = frozen(scene)
-    jac = jax.jacfwd(lambda y: fixed.residual(sigma * y, u) * row)(q_star / sigma)
-    jac = jax.lax.stop_gradient(jac)
     step = sigma * jnp.linalg.solve(jac, scene.residual(q_star, u) * row)
     finite = jnp.all(jnp.isfinite(step))
     step = jnp.where(finite, step, 0.0)

@@ -120,6 +120,13 @@ def equilibrium_from(
 
 def solve_core(scene: Scene, controls, q0, opts: SolverOptions) -> Equilibrium:
     """One equilibrium (traceable; :func:`solve_equilibrium` and the batch solver wrap it)."""
+    return solve_core_linearised(scene, controls, q0, opts)[0]
+
+
+def solve_core_linearised(scene: Scene, controls, q0, opts: SolverOptions):
+    """:func:`solve_core`, and the Jacobian ``dr/dy`` of the scaled residual at the solution
+    (:class:`ScaledProblem`'s scaling), from the continuation's last linearisation: no
+    derivative flows through it."""
     problem = ScaledProblem.build(scene, controls)
     fixed = frozen(problem)
     y0 = start_point(problem, q0, opts)
@@ -138,10 +145,22 @@ def solve_core(scene: Scene, controls, q0, opts: SolverOptions) -> Equilibrium:
         adjoint=optx.ImplicitAdjoint(linear_solver=lx.LU()),
     )
     steps = sol.stats["num_steps"] + flow_steps
-    return equilibrium_from(scene, fixed, solver, sol.value, sol.state, steps, opts.tol)
+    eq = equilibrium_from(scene, fixed, solver, sol.value, sol.state, steps, opts.tol)
+    return eq, jax.lax.stop_gradient(sol.state.jacobian)
 
 
 _solve = jit(solve_core)
+_solve_linearised = jit(solve_core_linearised)
+
+
+def linearised_equilibrium(scene: Scene, controls, q0, options: SolverOptions):
+    """:func:`solve_equilibrium` without retries, and the scaled Jacobian at the solution
+    (:func:`solve_core_linearised`): the implicit function theorem at an equilibrium needs no
+    other linearisation (the inverse solver)."""
+    dtype = solver_dtype(scene)
+    scene = static_load_sites(as_traced_leaves(scene, dtype))
+    controls = check_controls(scene, controls, dtype)
+    return _solve_linearised(scene, controls, check_q(scene, q0, dtype), options)
 
 
 def solve_equilibrium(
