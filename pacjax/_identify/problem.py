@@ -18,6 +18,7 @@ import numpy as np
 import optax
 
 from .._config import MATMUL_PRECISION
+from .._jit import jit
 from .._model.frameloads import FrameLoads
 from .._model.robot import ExponentialStiffening
 from .._model.rotation import exp_so3, matvec3
@@ -171,7 +172,7 @@ def _frame_jacobian(problem, theta, q, controls, row, meas, mask, rmeas, rmask):
     return r, d_theta + jnp.matmul(d_q, dq, precision=MATMUL_PRECISION), pred, rpred
 
 
-@eqx.filter_jit
+@jit
 def _evaluate(problem, theta, q, controls, rows, meas, mask, rmeas, rmask):
     axes = (None, None, 0, 0, 0 if rows is not None else None, 0, 0)
     axes += (0 if rmeas is not None else None, 0 if rmask is not None else None)

@@ -47,6 +47,7 @@ import jax.tree_util as jtu
 import numpy as np
 
 from .. import _deprecated
+from .._jit import jit
 from .._model.inputs import check_scene, static_load_sites
 from .._model.scene import Scene
 from .._statics.batch import solve_batch
@@ -610,7 +611,7 @@ def sample_workspace(
     return Workspace(controls=jnp.asarray(u), q=eq.q, tip=tip, converged=eq.converged & eq.stable)
 
 
-@eqx.filter_jit
+@jit
 def _tip_batch(scene, q):
     n = scene.n_segments - 1
     return jax.vmap(lambda x: scene.frames(x, np.asarray([n]), jnp.ones(1, x.dtype))[1][0])(q)

@@ -13,6 +13,7 @@ import optimistix as optx
 from jaxtyping import Array, Bool, Float, Int
 
 from .._config import MATMUL_PRECISION
+from .._jit import jit
 from .._model.rotation import matvec3
 from .._model.scene import Scene, normalise_sites
 from .._statics.equilibrium import linearised_equilibrium
@@ -119,11 +120,8 @@ def _equilibrium(scene, u, q0, options):
 
     Returns ``(q, ok)``; ``ok`` is False for a failed or unstable solve or a singular ``A``.
     """
-    eq, jac = linearised_equilibrium(scene, jax.lax.stop_gradient(u), q0, options)
+    eq, (jac, sigma, row) = linearised_equilibrium(scene, jax.lax.stop_gradient(u), q0, options)
     q_star = jax.lax.stop_gradient(eq.q)
-    dtype = q_star.dtype
-    sigma = scene.coordinate_scale(dtype)
-    row = 1.0 / (scene.elastic_stiffness_diagonal(dtype) * sigma)
     step = sigma * jnp.linalg.solve(jac, scene.residual(q_star, u) * row)
     finite = jnp.all(jnp.isfinite(step))
     step = jnp.where(finite, step, 0.0)
@@ -205,10 +203,10 @@ def _solve_core(scene, target, limits, u0, q0, rtol, atol, max_steps, options) -
     )
 
 
-solve_one = eqx.filter_jit(_solve_core)
+solve_one = jit(_solve_core)
 
 
-@eqx.filter_jit
+@jit
 def solve_many(scene, target, limits, u0, q0, rtol, atol, max_steps, options):
     def one(t, u, q):
         return _solve_core(scene, t, limits, u, q, rtol, atol, max_steps, options)
@@ -216,7 +214,7 @@ def solve_many(scene, target, limits, u0, q0, rtol, atol, max_steps, options):
     return jax.vmap(one)(target, u0, q0)
 
 
-@eqx.filter_jit
+@jit
 def tensions_at(scene, q, u):
     return scene.tendon_tensions(q, u)
 
@@ -242,10 +240,10 @@ def _taut_core(scene, limits: CommandLimits, u, q):
     return new, jnp.any(new != u)
 
 
-taut_one = eqx.filter_jit(_taut_core)
+taut_one = jit(_taut_core)
 
 
-@eqx.filter_jit
+@jit
 def taut_many(scene, limits, u, q):
     return jax.vmap(lambda a, b: _taut_core(scene, limits, a, b))(u, q)
 

@@ -6,12 +6,13 @@ import jax.tree_util as jtu
 import numpy as np
 from jaxtyping import Array, Float
 
+from .._jit import jit
 from .inputs import check_controls, check_q, check_scene
 from .rotation import matvec3
 from .scene import Scene, normalise_sites
 
 
-@eqx.filter_jit
+@jit
 def _frames(scene: Scene, q, segments: tuple[int, ...], s: tuple[float, ...], offsets):
     # Sites are static: the frames come from the same knot kinematics as the energy.
     rot, pos = scene.frames(q, np.asarray(segments, np.int64), np.asarray(s, float))
@@ -99,6 +100,6 @@ def tendon_tensions(scene: Scene, q, controls) -> Float[Array, " m"]:
     return _tensions(scene, q, jnp.asarray(controls, q.dtype))
 
 
-@eqx.filter_jit
+@jit
 def _tensions(scene, q, controls):
     return scene.tendon_tensions(q, controls)

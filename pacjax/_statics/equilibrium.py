@@ -125,8 +125,9 @@ def solve_core(scene: Scene, controls, q0, opts: SolverOptions) -> Equilibrium:
 
 def solve_core_linearised(scene: Scene, controls, q0, opts: SolverOptions):
     """:func:`solve_core`, and the Jacobian ``dr/dy`` of the scaled residual at the solution
-    (:class:`ScaledProblem`'s scaling), from the continuation's last linearisation: no
-    derivative flows through it."""
+    from the continuation's last linearisation, with the scaling (``y = q / sigma``,
+    ``r = row * F``): ``(equilibrium, (jacobian, sigma, row))``, no derivative flowing through
+    the last three."""
     problem = ScaledProblem.build(scene, controls)
     fixed = frozen(problem)
     y0 = start_point(problem, q0, opts)
@@ -146,7 +147,7 @@ def solve_core_linearised(scene: Scene, controls, q0, opts: SolverOptions):
     )
     steps = sol.stats["num_steps"] + flow_steps
     eq = equilibrium_from(scene, fixed, solver, sol.value, sol.state, steps, opts.tol)
-    return eq, jax.lax.stop_gradient(sol.state.jacobian)
+    return eq, jax.lax.stop_gradient((sol.state.jacobian, fixed.sigma, fixed.row))
 
 
 _solve = jit(solve_core)
@@ -154,9 +155,9 @@ _solve_linearised = jit(solve_core_linearised)
 
 
 def linearised_equilibrium(scene: Scene, controls, q0, options: SolverOptions):
-    """:func:`solve_equilibrium` without retries, and the scaled Jacobian at the solution
-    (:func:`solve_core_linearised`): the implicit function theorem at an equilibrium needs no
-    other linearisation (the inverse solver)."""
+    """:func:`solve_equilibrium` without retries, and the scaled Jacobian at the solution with
+    its scaling (:func:`solve_core_linearised`): the implicit function theorem at an
+    equilibrium needs no other linearisation (the inverse solver)."""
     dtype = solver_dtype(scene)
     scene = static_load_sites(as_traced_leaves(scene, dtype))
     controls = check_controls(scene, controls, dtype)

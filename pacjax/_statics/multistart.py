@@ -20,6 +20,7 @@ import jax.tree_util as jtu
 import numpy as np
 from jaxtyping import Array, Int
 
+from .._jit import jit
 from .._model.inputs import check_controls, check_scene, solver_dtype
 from .._model.scene import Scene
 from .._results import RESULTS
@@ -110,7 +111,7 @@ def random_starts(scene: Scene, n_starts: int, seed: int, spread: float, straigh
     return starts
 
 
-@eqx.filter_jit
+@jit
 def _shape_signatures(scene: Scene, qs):
     """Positions (m) and length-scaled rotations of frames along the robot, per row of ``qs``."""
     n = scene.n_segments

@@ -37,13 +37,13 @@ import sys
 import time
 from collections.abc import Callable
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 import pacjax as pj
 
+from .._jit import jit
 from .._model.inputs import check_scene
 from .._results import code_of
 
@@ -159,7 +159,7 @@ def sample_commands(sampler: str, n: int, low, high, seed: int = 0) -> np.ndarra
 
 
 # ------------------------------------------------------------------------------ outputs
-@eqx.filter_jit
+@jit
 def _pose_and_markers(scene, q):
     def one(qi):
         tip, rot = pj.tip_pose(scene, qi)
