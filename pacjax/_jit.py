@@ -26,8 +26,22 @@ try:
 except ImportError:  # an older jax: no options (they need to know that no trace is running)
     get_opaque_trace_state = None
 
+
+def _state_outside_any_trace():
+    """The trace state outside any transformation. Taken in a new thread (trace states are per
+    thread), so that it is right even when this module is first imported while a trace runs:
+    ``import pacjax`` loads its modules on first use, which may be inside the user's ``jit``."""
+    if get_opaque_trace_state is None:
+        return None
+    state = []
+    thread = threading.Thread(target=lambda: state.append(get_opaque_trace_state()))
+    thread.start()
+    thread.join()
+    return state[0]
+
+
 #: The trace state outside any transformation (taken at import).
-_TOP_LEVEL = None if get_opaque_trace_state is None else get_opaque_trace_state()
+_TOP_LEVEL = _state_outside_any_trace()
 
 #: XLA debug options of CPU compilations (see the module docstring).
 CPU_COMPILE_OPTIONS = {"xla_cpu_use_fusion_emitters": False}

@@ -48,6 +48,25 @@ def test_help_and_usage_errors_do_not_import_jax():
     assert not out["jax"]
 
 
+def test_a_solver_first_used_inside_the_users_jit_runs():
+    """pacjax loads its modules on first use, so the solver's module may first be imported
+    while the user's ``jit`` traces: its compile options (top-level calls only) must still be
+    left out of that nested call (they raised "compiler_options can only be passed to
+    top-level jax.jit")."""
+    out = _python(
+        """
+        import json
+        import equinox as eqx
+        import jax.numpy as jnp
+        import pacjax as pj
+        scene = pj.presets.stella2023(pj.PAC())
+        solve = eqx.filter_jit(lambda sc, u: pj.solve_equilibrium(sc, u).converged)
+        print(json.dumps({"converged": bool(solve(scene, jnp.full(9, 0.01)))}))
+        """
+    )
+    assert out["converged"]
+
+
 def test_import_leaves_jax_unimported_and_float64_on():
     """Arrays made after ``import pacjax`` but before any pacjax name is used are float64, and
     the ``JAX_ENABLE_X64`` that asked JAX for it is gone once a pacjax name is used."""

@@ -305,3 +305,21 @@ def test_cli_inverse(tmp_path, targets):
     bad.write_text("x,y\n0.1,0.2\n")
     result = CliRunner().invoke(cli, ["inverse", str(scene_file), str(bad)])
     assert result.exit_code == 1 and "expected x,y,z" in result.output
+
+
+@pytest.mark.parametrize("model", [pj.PAC(), pj.PolynomialCurvature(1)], ids=repr)
+def test_the_implicit_function_step_uses_the_solvers_last_jacobian(model):
+    """The inverse solver takes ``dF/dq`` at the equilibrium from the continuation's last
+    linearisation (:func:`pacjax._statics.equilibrium.linearised_equilibrium`), with the same
+    scaling: it is the forward Jacobian of the scaled residual there."""
+    import jax
+    import jax.numpy as jnp
+
+    from pacjax._statics.equilibrium import linearised_equilibrium
+
+    scene = pj.presets.stella2023(model, tip_mass=0.2)
+    u = jnp.asarray(np.random.default_rng(5).uniform(0.0, 0.02, scene.n_tendons))
+    eq, (jac, sigma, row) = linearised_equilibrium(scene, u, None, pj.SolverOptions())
+    assert bool(eq.converged)
+    expected = jax.jit(jax.jacfwd(lambda y: scene.residual(sigma * y, u) * row))(eq.q / sigma)
+    np.testing.assert_allclose(jac, expected, rtol=0, atol=1e-9 * float(jnp.abs(expected).max()))

@@ -857,6 +857,43 @@ def test_plane_frame_derivatives_are_the_autodiff_ones(model):
             np.testing.assert_allclose(hess, hess_ad, rtol=0, atol=1e-14 * np.abs(hess_ad).max())
 
 
+def _spec_rotation(frame, theta, phi):
+    """The spec's ``Rz(phi) Ry(theta) [Rz(-phi)]`` written out entry by entry."""
+    ct, st, cp, sp = jnp.cos(theta), jnp.sin(theta), jnp.cos(phi), jnp.sin(phi)
+    if frame == "paper":
+        return jnp.array([[cp * ct, -sp, cp * st], [sp * ct, cp, sp * st], [-st, 0.0, ct]])
+    v = ct - 1.0
+    return jnp.array(
+        [
+            [1 + cp * cp * v, cp * sp * v, cp * st],
+            [cp * sp * v, 1 + sp * sp * v, sp * st],
+            [-cp * st, -sp * st, ct],
+        ]
+    )
+
+
+@pytest.mark.parametrize("frame", ["torsion_free", "paper"])
+def test_plane_rotation_jet_is_the_spec_rotation_and_its_derivatives(frame):
+    """``R = B0 + sin(theta) B1 + (1 - cos theta) B2`` and its derivatives along
+    ``(theta, phi)`` up to the second equal the spec's matrix and its automatic derivatives."""
+    model = pj.PAC(frame=frame)
+    theta = jnp.asarray([0.0, 1e-9, 0.3, -2.0, 3.0])
+    phi = jnp.asarray(0.7)
+    jet = jax.jit(lambda t, p: model.plane_rotation_jet(t, p, order=2))(theta, phi)
+    spec = jax.jit(
+        jax.vmap(
+            lambda t: (
+                _spec_rotation(frame, t, phi),
+                jax.jacfwd(_spec_rotation, (1, 2))(frame, t, phi),
+                jax.hessian(_spec_rotation, (1, 2))(frame, t, phi),
+            )
+        )
+    )(theta)
+    value, (d_t, d_p), ((d_tt, d_tp), (_, d_pp)) = spec
+    for got, want in zip(jet, (value, d_t, d_p, d_tt, d_tp, d_pp), strict=True):
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-15)
+
+
 @eqx.filter_jit
 def _knot_frame_derivatives(model, q, length, knots, node_weights, lam):
     """The knot frames, and their first and second derivatives both written out and by

@@ -7,12 +7,14 @@ became traced values, the knots fell back to the default grid, and 3, 5, 6, 7, 9
 on one segment failed with "Size of label 'k' for operand 1 (8) does not match previous terms
 (9)" while 2, 4 or 8 (on the default grid) worked."""
 
+import equinox as eqx
 import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
 import pacjax as pj
-from pacjax._model.inputs import frozen, static_load_sites
+from pacjax._model.inputs import as_traced_leaves, frozen, static_load_sites
 
 HANGING = np.diag([1.0, -1.0, -1.0])
 
@@ -57,3 +59,24 @@ def test_frozen_keeps_static_sites_python_numbers_inside_jit():
     assert all(isinstance(s, float) for s in seen["frozen"])
     # what the solver used to do: the sites became traced values
     assert not any(isinstance(s, float) for s in seen["stop_gradient"])
+
+
+def test_known_sites_stay_knots_when_the_solve_is_traced():
+    """A solve inside a trace (the user's ``jit``, the inverse solver's Levenberg-Marquardt
+    residual) gets its scene as traced leaves, but the load sites given as numbers are still
+    Python numbers, hence knots: made arrays first, they were traced sites, each with its own
+    frame integration and Hessian block (10,935 instead of 6,519 equations for the paper's
+    robot), and the traced solve agrees with the plain one."""
+    # Sites as Python numbers, as the inverse solver passes its scene.
+    scene = static_load_sites(pj.presets.stella2023(pj.PAC(), tip_mass=0.2))
+    u = jnp.full(scene.n_tendons, 0.01)
+
+    @eqx.filter_jit
+    def traced(sc, controls):
+        prepared = static_load_sites(as_traced_leaves(sc, jnp.float64))
+        sites = [load.s for load in prepared.loads if hasattr(load, "s")]
+        assert sites and all(isinstance(s, float) for s in sites), sites
+        assert not prepared.energy_plan().points.traced
+        return pj.solve_equilibrium(sc, controls).q
+
+    np.testing.assert_allclose(traced(scene, u), pj.solve_equilibrium(scene, u).q, atol=1e-12)
