@@ -3,9 +3,9 @@ that shorten compilation.
 
 On XLA:CPU (jaxlib 0.10) most of the compile time of the solver's round goes to the MLIR
 fusion emitters. The classic elemental emitters compile the same HLO in about half the time
-with the same run time: the paper's robot with PAC, the structured linearisation of 64 rows
-compiled in 1.51 s against 2.69 s (48-53 us per row warm either way), and the first batch of
-100 rows took 7.7-8.4 s against 10.9 s (2 cores).
+with the same run time for the statics programs (``benchmarks/RESULTS.md``, "Bending-vector
+steps, 100x dt growth, classic XLA:CPU emitters"). The dynamics keep the default emitters: its
+long integrations ran slower with the classic ones.
 
 The options go to CPU compilations only, are left out where ``XLA_FLAGS`` sets them (the
 user's choice stands), and are dropped when this jaxlib does not know them (checked once, on a

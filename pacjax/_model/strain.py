@@ -186,8 +186,8 @@ class PlanarCurvature(StrainModel):
 
         ``R = B0(phi) + sin(theta) B1(phi) + (1 - cos theta) B2(phi)``
         (:meth:`rotation_basis`), so each derivative is three matrices per segment weighted by
-        three numbers per point. Differentiating the matrix entries by automatic
-        differentiation instead was a quarter of the solver's traced program (PAC).
+        three numbers per point: a far smaller traced program than automatic derivatives of the
+        nine matrix entries at every point.
         """
         basis = self.rotation_basis(phi, order)
         trig = _angle_coefficients(theta, order)  # (order + 1, *p, 3)

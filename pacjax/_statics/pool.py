@@ -27,10 +27,10 @@ _STEPS_PER_ROUND_DEFAULT = 4
 
 
 def _steps_per_round() -> int:
-    """Steps per round on the default backend. On XLA:CPU (the paper's robot with PAC, 1,000
-    rows in a pool of 128 slots) 2 steps ran 1.95 s against 1.98-2.05 s for 3 and 2.10-2.29 s
-    for 4: a finished slot idles for fewer steps, and a round costs little once the starting
-    points are computed per block of rows (:func:`_start_block`) instead of in every round.
+    """Steps per round on the default backend. Fewer steps per round leave a finished slot
+    idle for fewer steps, and a round costs little once the starting points are computed per
+    block of rows (:func:`_start_block`) instead of in every round; on XLA:CPU 2 was the
+    fastest (``benchmarks/RESULTS.md``, "Figures behind the solver's settings").
     """
     return STEPS_PER_ROUND.get(jax.default_backend(), _STEPS_PER_ROUND_DEFAULT)
 
@@ -100,8 +100,8 @@ def _advance(scene, opts, update, controls, params, y, state, reset, y_reset, ac
 
 
 #: Solver slots per CPU device. On XLA:CPU a row-step costs about the same in a pool of 128 as in
-#: one of 1,000 (1.5 and 1.25 ms, the paper's robot with PAC), and a smaller pool is refilled
-#: sooner, so 1,000 rows in a pool of 128 ran at 46 eq/s against 31 in one pool of 1,000.
+#: a much larger one, and a smaller pool is refilled sooner (``benchmarks/RESULTS.md``,
+#: "Figures behind the solver's settings").
 CPU_POOL_SLOTS = 128
 
 

@@ -83,9 +83,8 @@ class ScaledProblem(eqx.Module):
         (:func:`pacjax._model.hessian.follower_jacobian`; the residual is
         :meth:`residual_and_merit`'s).
         Other non-conservative scenes add the forward derivative of their non-conservative
-        loads alone (a few points of the kinematics), not of the whole residual: on 2 CPU cores
-        a warm batch of 24 equilibria of the paper's robot with ``PolynomialCurvature(6)`` (12
-        points) under a 3.41 N follower force took 174 s against 196 s."""
+        loads alone (a few points of the kinematics), not of the whole residual, which is
+        cheaper."""
         q = self.q(y)
         if self.dead_scene is not None:
             hessian = follower_jacobian(
@@ -121,9 +120,8 @@ class ScaledProblem(eqx.Module):
         on with ``theta < 0``), and every curvature carried along as a vector in the plane,
         ``c' = (c + dc) cos(turn) + c dphi sin(turn)``, so that ``theta' e(phi') = B'``. This
         agrees with ``y + dy`` to first order: the step's descent and the search along it are
-        unchanged. On the paper's robot with PAC (64 random commands, 200 g tip mass) a row took
-        6.5 continuation steps (mean) against 8.0; moving the plane to the principal axis of
-        the curvatures' vectors instead took 6.9-7.0.
+        unchanged, and the plane's turn no longer creeps (``benchmarks/RESULTS.md``, "Figures
+        behind the solver's settings").
         """
         k = self.scene.model.free_plane_angle()
         if k is None:
@@ -151,15 +149,15 @@ class ScaledProblem(eqx.Module):
         A PCC/PAC segment's bending-plane angle ``phi`` is undefined while it is straight (the
         shape does not depend on it), so a straight start is a degenerate saddle: the
         continuation first bends the segments in whatever plane ``phi`` says and then turns the
-        planes, with an indefinite stiffness all the while (on the paper's robot, 13 steps
-        from straight against 9 from aligned planes, batch mean). At zero curvature the force on
-        ``c0`` is exactly ``a cos(phi) + b sin(phi)``, since it is linear in the bending
-        direction ``(cos(phi), sin(phi))``: the residuals at ``phi = 0`` and ``pi / 2`` give
-        the plane of steepest descent. ``phi`` is taken in ``(-pi/2, pi/2]``, the half that the
-        regulariser ``k (1 - cos(phi))`` prefers; the sign of ``c0`` then picks the side. A
-        segment that is bent keeps its ``phi``, and so does one where ``keep`` (a boolean per
-        segment) says so. A straight segment whose force is below ``tol`` (scaled) takes the
-        plane of the segment before it (the first segment keeps its ``phi``).
+        planes, with an indefinite stiffness all the while, which costs steps. At zero
+        curvature the force on ``c0`` is exactly ``a cos(phi) + b sin(phi)``, since it is
+        linear in the bending direction ``(cos(phi), sin(phi))``: the residuals at ``phi = 0``
+        and ``pi / 2`` give the plane of steepest descent. ``phi`` is taken in
+        ``(-pi/2, pi/2]``, the half that the regulariser ``k (1 - cos(phi))`` prefers; the sign
+        of ``c0`` then picks the side. A segment that is bent keeps its ``phi``, and so does one
+        where ``keep`` (a boolean per segment) says so. A straight segment whose force is below
+        ``tol`` (scaled) takes the plane of the segment before it (the first segment keeps its
+        ``phi``).
         """
         k = self.scene.model.free_plane_angle()
         if k is None:
@@ -183,8 +181,7 @@ class ScaledProblem(eqx.Module):
         phi = jnp.where(turn, phi, coords[:, k])
         # A straight segment with no force on it is loaded only through the segments before
         # it, which bend in their own planes: it takes its predecessor's plane. (Kept at its
-        # phi, it meets a saddle in that plane: the paper's robot pulled by one tendon of
-        # section 1 took 34-40 steps against 9.)
+        # phi, it meets a saddle in that plane.)
         inherit = straight & ~turn
         for i in range(1, n):
             phi = phi.at[i].set(jnp.where(inherit[i], phi[i - 1], phi[i]))
