@@ -114,14 +114,13 @@ def _check_frame(frame: str) -> None:
         raise ValueError(f"frame must be one of {_FRAMES}, got {frame!r}")
 
 
-def _angle_coefficients(theta, order: int) -> Float[Array, "n *p 3"]:
-    """``(1, sin t, 1 - cos t)`` at ``t = theta`` and its derivatives up to ``order``."""
+def _angle_coefficients(theta, order: int) -> list[tuple[Float[Array, "*p"], Float[Array, "*p"]]]:
+    """``(sin t, 1 - cos t)`` at ``t = theta`` and their derivatives up to ``order`` (the
+    coefficient of ``B0`` is 1, and 0 in every derivative)."""
     st, ct = jnp.sin(theta), jnp.cos(theta)
-    one, zero = jnp.ones_like(theta), jnp.zeros_like(theta)
     # 1 - cos t as 2 sin^2(t / 2), which keeps its relative precision near straight.
     vers = 2.0 * jnp.sin(0.5 * theta) ** 2
-    rows = [(one, st, vers), (zero, ct, st), (zero, -st, ct)]
-    return jnp.stack([jnp.stack(r, axis=-1) for r in rows[: order + 1]])
+    return [(st, vers), (ct, st), (-st, ct)][: order + 1]
 
 
 def _matrix(rows) -> Float[Array, "3 3"]:
@@ -175,8 +174,25 @@ class PlanarCurvature(StrainModel):
     ) -> tuple[Float[Array, "*p 3 3"], Float[Array, "*p 3"]]:
         """Rotation (base rotation included) and tangent ``R e_z`` at bending angle ``theta``
         in the plane at angle ``phi``."""
-        (rot,) = self.plane_rotation_jet(theta, phi, order=0)
-        return rot, rot[..., :, 2]
+        # Entry by entry: the energy's automatic derivatives (the residual, and its Jacobian at
+        # a solution) run faster through this than through the matrices of the jet.
+        ct, st = jnp.cos(theta), jnp.sin(theta)
+        cp, sp = jnp.cos(phi), jnp.sin(phi)
+        zero = jnp.zeros_like(theta)
+        tangent = jnp.stack([cp * st, sp * st, ct], axis=-1)
+        if self.frame == "paper":
+            rows = [[cp * ct, -sp + zero, cp * st], [sp * ct, cp + zero, sp * st], [-st, zero, ct]]
+        else:
+            # Rz(phi) Ry(theta) Rz(-phi), with (cos theta - 1) written as -2 sin^2(theta / 2)
+            # so that it keeps its relative precision near the straight configuration.
+            vers = -2.0 * jnp.sin(0.5 * theta) ** 2
+            rows = [
+                [1.0 + cp * cp * vers, cp * sp * vers, cp * st],
+                [cp * sp * vers, 1.0 + sp * sp * vers, sp * st],
+                [-cp * st, -sp * st, ct],
+            ]
+        rot = jnp.stack([jnp.stack(r, axis=-1) for r in rows], axis=-2)
+        return rot, tangent
 
     def plane_rotation_jet(
         self, theta: Float[Array, "*p"], phi: Float[Array, ""], order: int
@@ -187,16 +203,22 @@ class PlanarCurvature(StrainModel):
         ``R = B0(phi) + sin(theta) B1(phi) + (1 - cos theta) B2(phi)``
         (:meth:`rotation_basis`), so each derivative is three matrices per segment weighted by
         three numbers per point: a far smaller traced program than automatic derivatives of the
-        nine matrix entries at every point.
+        nine matrix entries at every point. ``R`` itself is :meth:`plane_rotation_tangent`'s.
         """
+        rot = self.plane_rotation_tangent(theta, phi)[0]
+        if order == 0:
+            return (rot,)
         basis = self.rotation_basis(phi, order)
-        trig = _angle_coefficients(theta, order)  # (order + 1, *p, 3)
+        trig = _angle_coefficients(theta, order)
 
-        def combine(n, m):  # d^n / d theta^n d^m / d phi^m
-            return jnp.sum(trig[n][..., :, None, None] * basis[m], axis=-3)
+        def combine(n, m):  # d^n / d theta^n d^m / d phi^m, (n, m) != (0, 0)
+            # Written out, not a reduction over the three matrices: one elementwise loop.
+            sin_part, cos_part = trig[n]
+            out = sin_part[..., None, None] * basis[m, 1] + cos_part[..., None, None] * basis[m, 2]
+            return out + basis[m, 0] if n == 0 else out
 
-        pairs = ((0, 0), (1, 0), (0, 1), (2, 0), (1, 1), (0, 2))
-        return tuple(combine(n, m) for n, m in pairs[: (order + 1) * (order + 2) // 2])
+        pairs = ((1, 0), (0, 1), (2, 0), (1, 1), (0, 2))
+        return (rot, *(combine(n, m) for n, m in pairs[: (order + 1) * (order + 2) // 2 - 1]))
 
     def rotation_basis(self, phi: Float[Array, ""], order: int) -> Float[Array, "m 3 3 3"]:
         """``B[m, j]``: the ``m``-th derivative along ``phi`` (``m <= order``) of the matrix

@@ -300,28 +300,26 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
         merit_only = self._merit_only(fn, y, args, state)
         slope, rounding = self._slope(y, state, delta, eps)
 
-        take_full = rounding | first | escape
+        def search_cond(carry):
+            alpha, _, ok = carry
+            return ~ok & (alpha > _MIN_ALPHA)
+
+        def search_body(carry):
+            alpha, merit, _ = carry
+            alpha = _shorter(alpha, merit, state.merit, slope)
+            merit = merit_only(_moved(args, y, alpha * delta))
+            return alpha, merit, descends(merit) | first | escape
+
+        m_full = merit_only(_moved(args, y, delta))
+        ok_full = descends(m_full) | rounding | first | escape
         if not self.symmetric:
             # A Newton step that halved the residual is taken whatever the merit says: near a
             # solution of a soft structure the frozen work misses the stiffness of the
             # follower loads, and the merit of the Newton step can rise.
-            take_full = take_full | took_newton
-
-        def search_cond(carry):
-            alpha, _, ok, tried = carry
-            return ~tried | (~ok & (alpha > _MIN_ALPHA))
-
-        def search_body(carry):
-            # The full step is the first trial, inside the loop: one traced copy of the merit.
-            alpha, merit, _, tried = carry
-            alpha = jnp.where(tried, _shorter(alpha, merit, state.merit, slope), alpha)
-            merit = merit_only(_moved(args, y, alpha * delta))
-            ok = descends(merit) | first | escape | (~tried & take_full)
-            return alpha, merit, ok, jnp.asarray(True)
-
-        one = jnp.asarray(1.0, y.dtype)
-        init = (one, jnp.asarray(jnp.inf, y.dtype), jnp.asarray(False), jnp.asarray(False))
-        alpha, _, ok, _ = jax.lax.while_loop(search_cond, search_body, init)
+            ok_full = ok_full | took_newton
+        alpha, _, ok = jax.lax.while_loop(
+            search_cond, search_body, (jnp.asarray(1.0, y.dtype), m_full, ok_full)
+        )
         return alpha, ok
 
     def _merit_only(self, fn, y, args, state: PTCState):
