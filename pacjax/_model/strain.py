@@ -197,8 +197,8 @@ class PlanarCurvature(StrainModel):
     def plane_rotation_jet(
         self, theta: Float[Array, "*p"], phi: Float[Array, ""], order: int
     ) -> tuple[Float[Array, "*p 3 3"], ...]:
-        """The rotation at ``(theta, phi)`` and its partial derivatives up to ``order`` (0-2):
-        ``(R,)``, then ``R_theta, R_phi``, then ``R_theta_theta, R_theta_phi, R_phi_phi``.
+        """The rotation at ``(theta, phi)`` and its partial derivatives up to ``order`` (1 or
+        2): ``R, R_theta, R_phi``, then ``R_theta_theta, R_theta_phi, R_phi_phi``.
 
         ``R = B0(phi) + sin(theta) B1(phi) + (1 - cos theta) B2(phi)``
         (:meth:`rotation_basis`), so each derivative is three matrices per segment weighted by
@@ -206,8 +206,6 @@ class PlanarCurvature(StrainModel):
         nine matrix entries at every point. ``R`` itself is :meth:`plane_rotation_tangent`'s.
         """
         rot = self.plane_rotation_tangent(theta, phi)[0]
-        if order == 0:
-            return (rot,)
         basis = self.rotation_basis(phi, order)
         trig = _angle_coefficients(theta, order)
 

@@ -158,10 +158,15 @@ def linearised_equilibrium(scene: Scene, controls, q0, options: SolverOptions):
     """:func:`solve_equilibrium` without retries, and the scaled Jacobian at the solution with
     its scaling (:func:`solve_core_linearised`): the implicit function theorem at an
     equilibrium needs no other linearisation (the inverse solver)."""
+    return _solve_linearised(*_prepared(scene, controls, q0), options)
+
+
+def _prepared(scene: Scene, controls, q0):
+    """The scene's leaves ready for ``jit`` (:func:`as_traced_leaves`, known load sites static),
+    the controls and the start checked against it, in the scene's dtype."""
     dtype = solver_dtype(scene)
     scene = static_load_sites(as_traced_leaves(scene, dtype))
-    controls = check_controls(scene, controls, dtype)
-    return _solve_linearised(scene, controls, check_q(scene, q0, dtype), options)
+    return scene, check_controls(scene, controls, dtype), check_q(scene, q0, dtype)
 
 
 def solve_equilibrium(
@@ -197,10 +202,7 @@ def solve_equilibrium(
     """
     check_scene(scene)
     opts = resolve_options(options, **overrides)
-    dtype = solver_dtype(scene)
-    scene = static_load_sites(as_traced_leaves(scene, dtype))
-    controls = check_controls(scene, controls, dtype)
-    q0 = check_q(scene, q0, dtype)
+    scene, controls, q0 = _prepared(scene, controls, q0)
     eq = _solve(scene, controls, q0, opts)
     if opts.method == "ptc" and not _is_traced(eq.converged) and not bool(eq.converged):
         eq = _retry(scene, controls, q0, eq, opts, fallback)
