@@ -49,6 +49,7 @@ _PUBLIC = {
     "Equilibria": "._statics.multistart",
     "find_equilibria": "._statics.multistart",
     "SolverOptions": "._statics.options",
+    "SparseRingsWarning": "._statics.ringcheck",
     "Equilibrium": "._statics.solution",
     "Damping": ".dynamics",
     "Trajectory": ".dynamics",

@@ -1,6 +1,8 @@
-"""Ready-made scenes: the robot of the PAC paper (Stella, Guan, Leng, Della Santina, Hughes).
+"""Ready-made scenes: the robot of the PAC paper (Stella, Guan, Leng, Della Santina, Hughes), and
+a cast silicone tentacle whose tendons run in continuous channels (the robot of the motion-capture
+data in ``shared/data/soromox_tentacle``, from the SoRoMoX paper).
 
-Values the paper gives are used as given; the others are estimates, each documented below with
+Values the sources give are used as given; the others are estimates, each documented below with
 its reasoning, so that a lab with the real robot knows what to identify
 (:func:`pacjax.identify`) first.
 """
@@ -122,5 +124,102 @@ def stella2023(
         tendons=tendons,
         loads=all_loads,
         markers=sites,
+        quadrature_points=quadrature_points,
+    )
+
+
+#: The tentacle's two tapered pieces: (length m, radius at the base m, radius at the end m).
+TENTACLE_PIECES = ((0.305, 0.01541, 0.00642), (0.055, 0.00642, 0.00480))
+#: Young's modulus (Pa), Poisson's ratio and density (kg/m^3): the data's starting guess (the
+#: publication identified E ~ 3.15e5 Pa and rho ~ 1320 kg/m^3 from the eight takes).
+TENTACLE_MATERIAL = (5.05e5, 0.45, 1500.0)
+#: Channel distance from the centreline at the base and at the anchor (end of piece 1), m:
+#: d(s) = 0.0114 - 0.0295 s.
+TENTACLE_CHANNEL = (0.0114, 0.0114 - 0.0295 * 0.305)
+#: Marker sites (segment, s, offset in the cross-section frame, m) on their stalks. With the
+#: hanging mount, local +x is world +x.
+TENTACLE_MARKERS = (
+    (0, 0.1291 / 0.305, (0.025, 0.0, 0.0)),
+    (0, 0.2195 / 0.305, (-0.021, 0.0, 0.0)),
+    (0, 0.2800 / 0.305, (0.020, 0.0, 0.0)),
+    (1, 1.0, (0.0, 0.0, 0.008)),
+)
+
+
+def tentacle(
+    model: StrainModel | None = None,
+    *,
+    routing: str = "channel",
+    n_guides: int = 11,
+    young_modulus: float = TENTACLE_MATERIAL[0],
+    poisson: float = TENTACLE_MATERIAL[1],
+    density: float = TENTACLE_MATERIAL[2],
+    mount: str = "hanging",
+    loads: tuple = (),
+    quadrature_points: int = 8,
+) -> Scene:
+    """A cast silicone tentacle, 0.36 m, solid round section tapered in two pieces, with two
+    tendons in continuous channels anchored at the end of the first piece.
+
+    The robot of ``shared/data/soromox_tentacle`` (its README gives the geometry): the channels
+    run from 11.4 mm off the centreline at the base to 2.4 mm at the anchor, at 60 degrees either
+    side of world +x (tendon 0 towards world +y, tendon 1 towards -y, hanging). Both tendons are
+    in tension mode: controls (2,) are tensions in N. Markers as in the data (three on stalks
+    along the body, one 8 mm beyond the tip).
+
+    Section stiffness from the material: ``EI = E pi r^4 / 4``, ``GJ = EI / (1 + nu)``,
+    ``rho A = rho pi r^2`` at each piece's base (the taper scales them with ``r^4`` and ``r^2``),
+    and the end-load axial stiffness of a linear taper, ``E pi r0 r1 / L``.
+
+    Args:
+        model: strain model (default :class:`PAC`, frame ``"torsion_free"``).
+        routing: ``"channel"`` (as built) or ``"rings"`` (the same channels sampled by
+            ``n_guides`` rings per piece: chords, for comparison).
+        n_guides: rings per piece with ``routing="rings"``.
+        young_modulus, poisson, density: the silicone (Pa, -, kg/m^3).
+        mount: see :data:`MOUNTS` (the data hang).
+        loads: extra loads (gravity is always there).
+        quadrature_points: Gauss-Legendre points per segment.
+    """
+    if mount not in MOUNTS:
+        raise ValueError(f"mount must be one of {tuple(MOUNTS)}, got {mount!r}")
+    segments = []
+    for length, r0, r1 in TENTACLE_PIECES:
+        bending = young_modulus * math.pi * r0**4 / 4.0
+        segments.append(
+            Segment(
+                length=length,
+                bending_stiffness=bending,
+                axial_stiffness=young_modulus * math.pi * r0 * r1 / length,
+                torsion_stiffness=bending / (1.0 + poisson),
+                linear_density=density * math.pi * r0**2,
+                radius=r0,
+                radius_tip=r1,
+            )
+        )
+    robot = Robot(segments, base_rotation=MOUNTS[mount])
+    routed = (
+        {"routing": "channel"}
+        if routing == "channel"
+        else {"routing": routing, "guides": np.linspace(0.0, 1.0, n_guides).tolist()}
+    )
+    # Hanging, the base frame's y is world -y: the tendon towards world +y sits at -60 degrees.
+    tendons = [
+        Tendon(
+            segment=0,
+            angle=angle,
+            offset=TENTACLE_CHANNEL[0],
+            offset_end=TENTACLE_CHANNEL[1],
+            mode="tension",
+            **routed,
+        )
+        for angle in (-math.pi / 3, math.pi / 3)
+    ]
+    return Scene(
+        robot,
+        PAC() if model is None else model,
+        tendons=tendons,
+        loads=[Gravity(), *loads],
+        markers=TENTACLE_MARKERS,
         quadrature_points=quadrature_points,
     )

@@ -37,6 +37,7 @@ LAYERS = (
             "pacjax._model.robot",
             "pacjax._model.loads",
             "pacjax._model.tendons",
+            "pacjax._model.channels",
             "pacjax._model.energy",
             "pacjax._model.energy_plan",
         ),

@@ -97,9 +97,11 @@ def _segment_piece(seg: Segment, j: int, n: int, law) -> Segment:
 def _tendon_on_pieces(t: Tendon, n: int) -> Tendon:
     """A tendon on the robot with ``n`` pieces a segment (anchor and guides moved)."""
     seg, s = _piece(t.segment, t.s, n, anchor=True)
-    guides = sorted(
-        {round(g * n - j, 12) for g in t.guides for j in range(n) if j <= g * n <= j + 1}
-    )
+    guides = None
+    if t.routing == "rings":
+        guides = sorted(
+            {round(g * n - j, 12) for g in t.guides for j in range(n) if j <= g * n <= j + 1}
+        )
     return Tendon(
         seg,
         t.angle,
@@ -110,6 +112,8 @@ def _tendon_on_pieces(t: Tendon, n: int) -> Tendon:
         guides=guides,
         mode=t.mode,
         gain=t.gain,
+        routing=t.routing,
+        angle_end=t.angle_end,
     )
 
 

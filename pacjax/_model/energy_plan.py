@@ -10,6 +10,7 @@ import copy
 import jax
 import numpy as np
 
+from .channels import ChannelRouting
 from .energy import mass_beyond
 from .kinematics import Knots, index_runs
 from .loads import PointForce, PointMass
@@ -75,7 +76,12 @@ class EnergyPlan:
         self.point_masses = scene.loads_of(PointMass) if self.gravity is not None else []
         self.forces = scene.loads_of(PointForce, follower=False)
         self.mass_ids = [self.points.add(pm.segment, pm.s) for pm in self.point_masses]
-        self.routing = TendonRouting(scene.tendons) if scene.tendons else None
+        # Ring-routed tendons (guide points and chords) and channel-routed ones (per segment).
+        self.has_tendons = bool(scene.tendons)
+        routing = TendonRouting(scene.tendons)
+        self.routing = routing if routing else None
+        channels = ChannelRouting(scene.tendons, scene.n_segments)
+        self.channels = channels if channels else None
         if self.routing is not None:
             self.guide_ids = self.points.add_static(
                 self.routing.point_segment, self.routing.point_s

@@ -18,11 +18,13 @@ paper's robot with PAC the linearisation took 63-65 instead of 73-77 us per row.
 
 ``L_i`` also holds each tendon's length inside segment ``i`` when every chord of the routing
 lies in one segment (:class:`pacjax._model.tendons.LocalChords`): a chord's length does not depend
-on where its segment is. ``Psi`` then sums those parts and needs world frames only at the mass and
-force sites, so its Hessian along the ``n d`` directions is a small fraction of the total. The
-chords' own derivatives are written out from the knot frames' (the chord ends are affine in the
-frames; :func:`pacjax._model.tendons.tendon_parts_derivatives`), and their pull on the frames joins
-the frames' curvature term: differentiating through the chords took a third of the time.
+on where its segment is; so does a channel's (:mod:`pacjax._model.channels`), whose length in a
+segment depends on that segment's strain alone. ``Psi`` then sums those parts and needs world
+frames only at the mass and force sites, so its Hessian along the ``n d`` directions is a small
+fraction of the total. The chords' own derivatives are written out from the knot frames' (the
+chord ends are affine in the frames; :func:`pacjax._model.tendons.tendon_parts_derivatives`), and
+their pull on the frames joins the frames' curvature term: differentiating through the chords
+took a third of the time.
 """
 
 from typing import Any, NamedTuple
@@ -71,6 +73,7 @@ class _Linearised(NamedTuple):
 
     frame_inputs: tuple  # the per-segment inputs of the frames (Scene.segment_inputs)
     chords: Any  # the chords' inputs, or None
+    channels: Any  # the channels' inputs, or None
     frames: tuple  # every knot frame per segment: (rotations, positions)
     chord_derivatives: Any  # tendon parts and their derivatives, or None
     values: tuple  # L_i: (rotations, positions, moments, tendon parts or None)
@@ -85,13 +88,24 @@ def _linearise(scene: Scene, coords, plan, consts, dtype) -> _Linearised:
     parts (when every chord lies in one segment) written out from the frames'
     (:func:`pacjax._model.tendons.tendon_parts_derivatives`): as automatic derivatives through
     the chords they were a third of :func:`energy_derivatives`' time."""
-    *frame_inputs, chords = scene.segment_inputs(plan, consts, dtype)
+    *frame_inputs, chords, channels = scene.segment_inputs(plan, consts, dtype)
     f_jac, f_val = jax.vmap(scene.segment_frames_jacobian)(coords, *frame_inputs)
     chord_d = None
+    parts = parts_jac = None
     if chords is not None:
         chord_d = jax.vmap(lambda v, j, ch: tendon_parts_derivatives(v[0], v[1], j[0], j[1], ch))(
             f_val, f_jac, chords
         )
+        parts, parts_jac = chord_d.parts, chord_d.jacobian
+    if channels is not None:
+        # The channels' parts are a small function of the segment's coordinates alone.
+        c_jac, c_val = jax.vmap(
+            lambda y, length, ch: jacobian_and_value(
+                lambda x: scene.segment_channel_lengths(x, length, ch), y
+            )
+        )(coords, frame_inputs[0], channels)
+        parts = c_val if parts is None else parts + c_val
+        parts_jac = c_jac if parts_jac is None else parts_jac + c_jac
     traced = [
         jacobian_and_value(lambda y, k=k, s_k=s_k: scene.traced_local_frame(y, k, s_k), coords[k])
         for k, s_k in plan.points.traced
@@ -99,10 +113,11 @@ def _linearise(scene: Scene, coords, plan, consts, dtype) -> _Linearised:
     return _Linearised(
         frame_inputs=tuple(frame_inputs),
         chords=chords,
+        channels=channels,
         frames=(f_val[0], f_val[1]),
         chord_derivatives=chord_d,
-        values=(*f_val, None if chord_d is None else chord_d.parts),
-        jacobians=(*f_jac, None if chord_d is None else chord_d.jacobian),
+        values=(*f_val, parts),
+        jacobians=(*f_jac, parts_jac),
         traced_sites=tuple(k for k, _ in plan.points.traced),
         traced_values=tuple(v for _, v in traced),
         traced_jacobians=tuple(j for j, _ in traced),
@@ -179,7 +194,7 @@ def _curvature(scene: Scene, coords, plan, lin: _Linearised, lam_seg, lam_traced
     # Back from Psi's rows to every knot: a constant one-hot product, not a scatter.
     embed = np.eye(plan.knots.width)[:, plan.load_rows]
 
-    def curvature(qi, lam_i, cd, rot, pos, ch, *frame_args):
+    def curvature(qi, lam_i, cd, rot, pos, ch, channels, *frame_args):
         lam_rot, lam_pos, lam_moment, lam_parts = lam_i
         # Psi's weights on every knot (zero off its rows).
         e = jnp.asarray(embed, rot.dtype)
@@ -192,10 +207,25 @@ def _curvature(scene: Scene, coords, plan, lin: _Linearised, lam_seg, lam_traced
         if cd is not None:
             h_parts, (g_rot, g_pos) = cd.curvature(lam_parts, rot, pos, ch)
             lam_frames = (lam_frames[0] + g_rot, lam_frames[1] + g_pos, lam_frames[2])
+        if channels is not None:
+            length = frame_args[0]
+            h_parts = h_parts + jax.hessian(
+                lambda y: jnp.dot(
+                    lam_parts,
+                    scene.segment_channel_lengths(y, length, channels),
+                    precision=MATMUL_PRECISION,
+                )
+            )(qi)
         return scene.segment_frames_curvature(qi, tuple(lam_frames), *frame_args) + h_parts
 
     blocks = jax.vmap(curvature)(
-        coords, lam_seg, lin.chord_derivatives, *lin.frames, lin.chords, *lin.frame_inputs
+        coords,
+        lam_seg,
+        lin.chord_derivatives,
+        *lin.frames,
+        lin.chords,
+        lin.channels,
+        *lin.frame_inputs,
     )
     for k, s_k, lt in zip(
         lin.traced_sites, (s for _, s in plan.points.traced), lam_traced, strict=True

@@ -13,6 +13,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from .._config import MATMUL_PRECISION
+from .channels import ChannelRouting, segment_channel_parts
 from .energy import elastic_energy, mass_beyond, moment_cotangent, robot_section_stiffness
 from .energy_plan import EnergyPlan, Indexed
 from .kinematics import (
@@ -109,6 +110,7 @@ class SceneConstants(eqx.Module):
     body_mass: Float[Array, " n"] | None
     guide_offsets: Float[Array, "g 3"] | None
     rest_lengths: Float[Array, " m"] | None
+    channels: dict | None = None  # ChannelRouting.geometry
 
 
 class Scene(eqx.Module):
@@ -175,6 +177,14 @@ class Scene(eqx.Module):
                 raise ValueError(
                     f"Scene.tendons[{i}] is anchored on segment {t.segment}, but the robot has "
                     f"{n} segments (0..{n - 1})"
+                )
+        if any(t.routing == "channel" for t in self.tendons):
+            q0 = jnp.zeros(self.model.dofs_per_segment())
+            if self.model.base_rotation(q0) is not None:
+                raise ValueError(
+                    "Scene.tendons: a channel tendon needs frames that run on continuously from "
+                    "one segment to the next; this model twists each segment's base "
+                    "(frame='paper'): use frame='torsion_free' or rings"
                 )
         kinds = (Gravity, PointMass, PointForce, PointMoment)
         for i, load in enumerate(self.loads):
@@ -306,15 +316,40 @@ class Scene(eqx.Module):
 
     def tendon_lengths(self, q: Float[Array, " n_dofs"]) -> Float[Array, " m"]:
         """Length (m) of every tendon at configuration ``q``."""
+        lengths = self._channel_lengths(self.coordinates(q))
         routing = TendonRouting(self.tendons)
-        rot, pos = self.frames(q, routing.point_segment, routing.point_s)
-        offsets = routing.local_offsets(self.tendons, q.dtype)
-        return routing.lengths(pos + matvec3(rot, offsets))
+        if routing:
+            rot, pos = self.frames(q, routing.point_segment, routing.point_s)
+            offsets = routing.local_offsets(self.tendons, q.dtype)
+            lengths = lengths + routing.lengths(pos + matvec3(rot, offsets))
+        return lengths
 
     def rest_tendon_lengths(self, dtype=float) -> Float[Array, " m"]:
         """Length (m) of every tendon on the straight robot at rest."""
+        segment_lengths = self.robot.stacked("length").astype(dtype)
+        lengths = self._channel_lengths(jnp.zeros((self.n_segments, self.dofs_per_segment), dtype))
         routing = TendonRouting(self.tendons)
-        return routing.rest_lengths(self.tendons, self.robot.stacked("length").astype(dtype))
+        if routing:
+            lengths = lengths + routing.rest_lengths(self.tendons, segment_lengths)
+        return lengths
+
+    def _channel_lengths(self, coords: Float[Array, "n d"]) -> Float[Array, " m"]:
+        """The channel tendons' lengths (m) at per-segment coordinates ``coords`` (zero for
+        the ring tendons)."""
+        dtype = coords.dtype
+        channels = ChannelRouting(self.tendons, self.n_segments)
+        if not channels:
+            return jnp.zeros(self.n_tendons, dtype)
+        parts = jax.vmap(self.segment_channel_lengths)(
+            coords,
+            self.robot.stacked("length").astype(dtype),
+            channels.geometry(self.tendons, dtype),
+        )
+        return jnp.sum(parts, axis=0)
+
+    def segment_channel_lengths(self, qi, length, channels) -> Float[Array, " m"]:
+        """One segment's part of every channel tendon's length (m)."""
+        return segment_channel_parts(self.model, qi, length, channels, self.quadrature_points)
 
     def tendon_tensions(self, q, controls) -> Float[Array, " m"]:
         """Tension (N) of every tendon at configuration ``q`` under ``controls``."""
@@ -327,14 +362,17 @@ class Scene(eqx.Module):
         """The parameter-only part of the energy (see :class:`SceneConstants`)."""
         bending, torsion = robot_section_stiffness(self.robot, self.quadrature_points, dtype)
         plan = self.energy_plan()
-        node_mass = body_mass = offsets = rest = None
+        node_mass = body_mass = offsets = rest = channels = None
         if plan is not None and plan.gravity is not None:
             node_mass = plan.node_mass(dtype)
             body_mass = mass_beyond(self.robot, np.zeros(self.n_segments), dtype)
         if plan is not None and plan.routing is not None:
             offsets = plan.routing.local_offsets(self.tendons, dtype)
+        if plan is not None and plan.channels is not None:
+            channels = plan.channels.geometry(self.tendons, dtype)
+        if plan is not None and plan.has_tendons:
             rest = self.rest_tendon_lengths(dtype)
-        return SceneConstants(bending, torsion, node_mass, body_mass, offsets, rest)
+        return SceneConstants(bending, torsion, node_mass, body_mass, offsets, rest, channels)
 
     def elastic_energy(
         self, q: Float[Array, " n_dofs"], consts: SceneConstants | None = None
@@ -383,12 +421,15 @@ class Scene(eqx.Module):
             lambda y: contract(lam, self._segment_frames(y, length, knots, node_weights))
         )(qi)
 
-    def _segment_local(self, qi, length, knots, node_weights, chords):
+    def _segment_local(self, qi, length, knots, node_weights, chords, channels):
         """One segment's part of the local kinematics: its knot frames and weighted tangent
         integral in its base frame (:meth:`_segment_frames`), and its tendons' lengths inside
-        it (None without :class:`LocalChords`)."""
+        it, from local chords and channels (None when it has neither)."""
         rot, pos, moment = self._segment_frames(qi, length, knots, node_weights)
         parts = None if chords is None else segment_tendon_parts(rot, pos, chords)
+        if channels is not None:
+            in_channels = self.segment_channel_lengths(qi, length, channels)
+            parts = in_channels if parts is None else parts + in_channels
         return rot, pos, moment, parts
 
     def segment_inputs(self, plan: EnergyPlan, consts: SceneConstants, dtype):
@@ -396,7 +437,7 @@ class Scene(eqx.Module):
         lengths = self.robot.stacked("length").astype(dtype)
         grid = jnp.asarray(plan.knots.s, dtype)
         chords = None if plan.chords is None else plan.chords.inputs(consts.guide_offsets)
-        return lengths, grid, consts.node_mass, chords
+        return lengths, grid, consts.node_mass, chords, consts.channels
 
     # The energy is E_el(q) + Psi(L_0(q_0), ..., L_n-1(q_n-1)): each segment's local kinematics
     # L_i (frames at its knots in its own base frame) depends on its own coordinates only, and
@@ -404,7 +445,7 @@ class Scene(eqx.Module):
     def energy_plan(self) -> EnergyPlan | None:
         """The points and terms the load part of the energy needs (None: elastic only)."""
         plan = EnergyPlan(self)
-        return plan if plan.points or plan.gravity is not None else None
+        return plan if plan.points or plan.gravity is not None or plan.has_tendons else None
 
     def _local_kinematics(
         self, coords: Float[Array, "n d"], plan: EnergyPlan, consts: SceneConstants
@@ -457,13 +498,14 @@ class Scene(eqx.Module):
                 energy = energy - pm.mass.astype(dtype) * jnp.dot(
                     pos_at[k], accel, precision=MATMUL_PRECISION
                 )
-        if plan.routing is not None:
-            if parts is not None:
-                lengths = jnp.sum(parts, axis=0)
-            else:
+        if plan.has_tendons:
+            # Local chords and channels as per-segment parts; chords that span a segment
+            # without a ring at its end in the world.
+            lengths = jnp.zeros(self.n_tendons, dtype) if parts is None else jnp.sum(parts, axis=0)
+            if plan.routing is not None and plan.chords is None:
                 sl = plan.guide_ids
                 guides = pos_at[sl] + matvec3(rot_at[sl], consts.guide_offsets)
-                lengths = plan.routing.lengths(guides)
+                lengths = lengths + plan.routing.lengths(guides)
             energy = energy + tendon_energy(self.tendons, lengths, consts.rest_lengths, controls)
         for f, k in zip(plan.forces, plan.force_ids, strict=True):
             energy = energy - jnp.sum(f.force.astype(dtype) * pos_at[k])

@@ -1,8 +1,10 @@
 """Tendons: routing through guide rings, length, tension and energy.
 
-A tendon runs from its entry ring (the robot's base for a free tendon, the base of its own
-segment for one in a Bowden cable) through guide rings at fixed ``s`` values to its anchor. Its
-length is the sum of straight chords between consecutive guide points (frictionless pulleys).
+A tendon runs from its entry (the robot's base for a free tendon, the base of its own segment
+for one in a Bowden cable) to its anchor, either through guide rings at fixed ``s`` values (its
+length is the sum of straight chords between consecutive guide points: frictionless pulleys) or
+in a continuous channel inside the body (its length is the arc length of the tendon curve:
+:mod:`pacjax._model.channels`).
 
 In length mode the motor holds the commanded length ``l_bar = l_rest - u`` with gain
 ``kappa_P``: tension ``kappa_P max(l - l_bar, 0)`` and energy ``1/2 kappa_P max(l - l_bar, 0)^2``.
@@ -21,6 +23,7 @@ from .._config import MATMUL_PRECISION
 from .robot import as_float, check_finite, check_positive, check_scalar, float_field
 
 MODES = ("length", "tension")
+ROUTINGS = ("rings", "channel")
 DEFAULT_GUIDES = tuple(np.linspace(0.0, 1.0, 11).tolist())
 
 
@@ -40,17 +43,23 @@ class Tendon(eqx.Module):
     Args:
         segment: index of the segment holding the anchor.
         angle: angle (rad) of the tendon around the cross-section, from the x axis.
-        offset: radial distance (m) of the tendon from the backbone at its entry ring.
+        offset: radial distance (m) of the tendon from the backbone at its entry.
         s: anchor position within ``segment``, in ``(0, 1]``.
-        offset_end: radial distance (m) at the anchor (a tapered body); linear along the route.
-            Default: ``offset``.
+        offset_end: radial distance (m) at the anchor (a tapered body); linear along the route
+            (in the route coordinate ``segment index + s``). Default: ``offset``.
         bowden: True when the tendon reaches its segment through a Bowden cable and acts on
             that segment only; False when it runs through every proximal segment.
         guides: ``s`` values of the guide rings in each segment it crosses (default: 11 evenly
-            spaced rings including both ends).
+            spaced rings including both ends). Rings only.
         mode: ``"length"`` (motor holds a commanded length) or ``"tension"`` (control is a
             tension in N).
         gain: ``kappa_P`` (N/m), required in length mode.
+        routing: ``"rings"`` (straight chords between guide rings, the paper's robot) or
+            ``"channel"`` (a continuous channel inside the body: the tendon follows the curve
+            at ``offset`` and ``angle`` from the backbone all along its route).
+        angle_end: angle (rad) at the anchor, linear along the route like the offset: a helical
+            channel. Default: ``angle``. Channels only (a ring tendon's holes are all at
+            ``angle``).
     """
 
     segment: int = eqx.field(static=True)
@@ -62,6 +71,8 @@ class Tendon(eqx.Module):
     guides: tuple[float, ...] = eqx.field(static=True, default=DEFAULT_GUIDES)
     mode: str = eqx.field(static=True, default="length")
     gain: Float[Array, ""] | None = None
+    routing: str = eqx.field(static=True, default="rings")
+    angle_end: Float[Array, ""] | None = None
 
     def __init__(
         self,
@@ -74,6 +85,8 @@ class Tendon(eqx.Module):
         guides=None,
         mode="length",
         gain=None,
+        routing="rings",
+        angle_end=None,
     ):
         if not isinstance(segment, (int, np.integer)) or isinstance(segment, bool):
             raise TypeError(f"Tendon.segment must be an integer index, got {segment!r}")
@@ -85,6 +98,17 @@ class Tendon(eqx.Module):
         if not isinstance(bowden, (bool, np.bool_)):
             raise TypeError(f"Tendon.bowden must be True or False, got {bowden!r}")
         self.bowden = bool(bowden)
+        if routing not in ROUTINGS:
+            raise ValueError(f"Tendon.routing must be one of {ROUTINGS}, got {routing!r}")
+        self.routing = routing
+        if routing == "channel" and guides is not None:
+            raise ValueError("Tendon.guides applies to routing='rings' only (a channel has none)")
+        if routing == "rings" and angle_end is not None:
+            raise ValueError(
+                "Tendon.angle_end applies to routing='channel' only (a ring tendon's holes lie "
+                "at one angle)"
+            )
+        self.angle_end = None if angle_end is None else as_float(angle_end, "Tendon.angle_end")
         if guides is None:
             guides = DEFAULT_GUIDES
         elif isinstance(guides, (str, bytes)) or not np.iterable(guides):
@@ -109,15 +133,29 @@ class Tendon(eqx.Module):
         if self.offset_end is not None:
             check_scalar("Tendon.offset_end", self.offset_end)
             check_positive("Tendon.offset_end", self.offset_end, allow_zero=True)
+        if self.angle_end is not None:
+            check_scalar("Tendon.angle_end", self.angle_end)
+            check_finite("Tendon.angle_end", self.angle_end)
         if self.mode == "length" and self.gain is None:
             raise ValueError("Tendon.gain (kappa_P, N/m) is required for a length-mode tendon")
         if self.gain is not None:  # checked in tension mode too: a NaN is never silently kept
             check_scalar("Tendon.gain", self.gain)
             check_positive("Tendon.gain", self.gain)
 
+    @property
+    def entry_segment(self) -> int:
+        """The segment at whose base the tendon enters the body."""
+        return self.segment if self.bowden else 0
+
+    def route_fraction(self, segment: int, s: float) -> float:
+        """Where ``(segment, s)`` lies along the route, from 0 (entry) to 1 (anchor), in the
+        route coordinate ``segment index + s`` in which offset and angle are linear."""
+        start = self.entry_segment
+        return (segment + s - start) / (self.segment + self.s - start)
+
     def route(self) -> list[tuple[int, float]]:
         """Guide points ``(segment, s)`` from the entry ring to the anchor."""
-        start = self.segment if self.bowden else 0
+        start = self.entry_segment
         points: list[tuple[int, float]] = []
         for k in range(start, self.segment + 1):
             ring_s = sorted(set(self.guides) | ({0.0} if k == start else set()))
@@ -132,7 +170,8 @@ class Tendon(eqx.Module):
 
 
 class TendonRouting:
-    """All tendons of a scene flattened into guide points and chords (static index arrays).
+    """The ring-routed tendons of a scene flattened into guide points and chords (static index
+    arrays; tendon indices are the scene's, channel tendons have no points).
 
     Built from the tendons' static routing only, so it is rebuilt cheaply at trace time.
     """
@@ -140,10 +179,10 @@ class TendonRouting:
     def __init__(self, tendons):
         segs, ss, ids, fracs, starts, chord_ids = [], [], [], [], [], []
         for t_id, tendon in enumerate(tendons):
+            if tendon.routing != "rings":
+                continue
             route = tendon.route()
-            # Offsets taper linearly in the route's normalised arc coordinate (segment + s).
-            coord = np.array([k + s for k, s in route])
-            frac = (coord - coord[0]) / (coord[-1] - coord[0])
+            frac = [tendon.route_fraction(k, s) for k, s in route]
             first = len(segs)
             for (k, s), f in zip(route, frac, strict=True):
                 segs.append(k)
@@ -159,6 +198,9 @@ class TendonRouting:
         self.chord_start = np.asarray(starts, np.int32)
         self.chord_tendon = np.asarray(chord_ids, np.int32)
         self.n_tendons = len(tendons)
+
+    def __bool__(self):
+        return len(self.point_segment) > 0
 
     def local_offsets(self, tendons, dtype) -> Float[Array, "p 3"]:
         """Guide point offsets (m) in their cross-section frames."""

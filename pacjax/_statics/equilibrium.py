@@ -44,6 +44,7 @@ from .continuation import conservative_part, retry_failed
 from .options import SolverOptions, resolve_options
 from .problem import ScaledProblem, flow_field
 from .ptc import PseudoTransientContinuation, final_code, max_abs
+from .ringcheck import warn_sparse_rings
 from .solution import Equilibrium
 
 
@@ -206,6 +207,7 @@ def solve_equilibrium(
     eq = _solve(scene, controls, q0, opts)
     if opts.method == "ptc" and not _is_traced(eq.converged) and not bool(eq.converged):
         eq = _retry(scene, controls, q0, eq, opts, fallback)
+    warn_sparse_rings(scene, eq.q)
     return eq
 
 

@@ -18,7 +18,7 @@ from .._model.tendons import Tendon
 from .._statics.options import SolverOptions
 
 #: Presets a scene file may name, by name.
-PRESETS = {"stella2023": presets.stella2023}
+PRESETS = {"stella2023": presets.stella2023, "tentacle": presets.tentacle}
 #: Base rotations (base frame -> world) of the named mounts; the robot's rest axis is the base +z.
 MOUNTS = {name: np.asarray(r, float) for name, r in presets.MOUNTS.items()}
 
@@ -379,11 +379,21 @@ def _read_tendon(t: _Table, n_segments: int) -> Tendon:
         angle = math.radians(t.number("angle_deg"))
     else:
         t.fail("missing required field angle_deg (or angle, rad)")
+    routing = t.string("routing", "rings", choices=("rings", "channel"))
     if t.has("guides") and t.has("n_guides"):
         t.fail("give either guides or n_guides, not both")
+    if routing == "channel" and (t.has("guides") or t.has("n_guides")):
+        t.fail("a channel tendon has no guide rings (remove guides/n_guides)", "routing")
+    if routing == "rings" and (t.has("angle_end") or t.has("angle_end_deg")):
+        t.fail('angle_end applies to channel tendons only (routing = "channel")', "routing")
     guides = t.numbers("guides")
     if t.has("n_guides"):
         guides = np.linspace(0.0, 1.0, t.integer("n_guides", minimum=2)).tolist()
+    if t.has("angle_end") and t.has("angle_end_deg"):
+        t.fail("give either angle_end (rad) or angle_end_deg, not both")
+    angle_end = t.number("angle_end")
+    if t.has("angle_end_deg"):
+        angle_end = math.radians(t.number("angle_end_deg"))
     mode = t.string("mode", "length", choices=("length", "tension"))
     gain = t.number("gain")
     if mode == "length" and gain is None:
@@ -398,6 +408,8 @@ def _read_tendon(t: _Table, n_segments: int) -> Tendon:
         guides=guides,
         mode=mode,
         gain=gain,
+        routing=routing,
+        angle_end=angle_end,
     )
     t.finish()
     return t.build(Tendon, **kwargs)

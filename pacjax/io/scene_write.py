@@ -83,12 +83,7 @@ def _robot_table(robot: Robot) -> dict:
 
 def _tendon_table(t: Tendon) -> dict:
     out: dict = {"segment": t.segment}
-    angle = _scalar(t.angle)
-    degrees = round(math.degrees(angle), 9)
-    if abs(math.radians(degrees) - angle) <= 1e-15 * max(1.0, abs(angle)):  # a few ulps
-        out["angle_deg"] = degrees
-    else:
-        out["angle"] = angle
+    out.update(_angle_entry("angle", _scalar(t.angle)))
     out["offset"] = _scalar(t.offset)
     if t.s != 1.0:
         out["s"] = t.s
@@ -97,7 +92,11 @@ def _tendon_table(t: Tendon) -> dict:
     if t.bowden:
         out["bowden"] = True
     n = len(t.guides)
-    if t.guides == DEFAULT_GUIDES:
+    if t.routing == "channel":
+        out["routing"] = "channel"
+        if t.angle_end is not None:
+            out.update(_angle_entry("angle_end", _scalar(t.angle_end)))
+    elif t.guides == DEFAULT_GUIDES:
         pass
     elif n >= 2 and t.guides == tuple(np.linspace(0.0, 1.0, n).tolist()):
         out["n_guides"] = n
@@ -107,6 +106,15 @@ def _tendon_table(t: Tendon) -> dict:
     if t.gain is not None:
         out["gain"] = _scalar(t.gain)
     return out
+
+
+def _angle_entry(key: str, angle: float) -> dict:
+    """``{key_deg: degrees}`` when that reads back to ``angle`` within a few ulps, else
+    ``{key: radians}``."""
+    degrees = round(math.degrees(angle), 9)
+    if abs(math.radians(degrees) - angle) <= 1e-15 * max(1.0, abs(angle)):
+        return {f"{key}_deg": degrees}
+    return {key: angle}
 
 
 def _load_table(load) -> dict:

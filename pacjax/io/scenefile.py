@@ -49,6 +49,10 @@ before the first table, as TOML puts every later key into the table above it::
     offset_end = 0.02            # m at the anchor, tapered routing (optional)
     bowden = false               # acts on its own segment only (optional: false)
     n_guides = 10                # evenly spaced guide rings per segment, or `guides = [s, ...]`
+    routing = "rings"            # "rings" (chords between guide rings) | "channel" (a continuous
+                                 # channel inside the body: no guides; optional: "rings")
+    # angle_end_deg = 120.0      # channels only: angle at the anchor, a helical channel (or
+                                 # `angle_end`, rad; optional: the angle at the entry)
     mode = "length"              # "length" (motor holds a length, control = pull-in, m) |
                                  # "tension" (control = tension, N)
     gain = 2e4                   # kappa_P, N/m (length mode)

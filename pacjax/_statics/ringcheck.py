@@ -1,0 +1,71 @@
+"""The warning that a ring-routed tendon's rings are too sparse for the curvature a solve
+reached: a tendon that runs in a continuous channel, modelled by rings, gets the chords' shorter
+moment arm (:func:`pacjax._model.channels.ring_chord_sag`).
+
+On the tentacle of ``shared/data/soromox_tentacle`` modelled with rings along its channels, at
+tensions of the data's range, the chords sagged up to 17-69 % of the offset with 11 rings per
+segment (markers 8-118 mm from the channel model), 4-12 % with 21, 1-3 % with 41 (0.4-3.9 mm)
+and 0.3-0.7 % with 81; the paper's ring-stacked robot reaches 0.2-0.4 % (9 random commands).
+"""
+
+import warnings
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._jit import jit
+from .._model.channels import ring_chord_sag
+
+#: The chords' sag, relative to the tendon's offset, above which a solve warns.
+SAG_TOLERANCE = 0.02
+#: Rows checked per call (padded): one compiled check per scene structure.
+_ROWS = 256
+
+
+class SparseRingsWarning(UserWarning):
+    """A ring-routed tendon's chords fall well short of a channel through the same rings."""
+
+
+@jit
+def _worst_sag(scene, q):
+    return jnp.max(jax.vmap(lambda x: ring_chord_sag(scene, x))(q), axis=0)
+
+
+_warned: set = set()
+
+
+def warn_sparse_rings(scene, q) -> None:
+    """Warn, once per tendon (its index and routing), when the chords of a ring-routed tendon sag more than
+    :data:`SAG_TOLERANCE` of its offset below a channel through its rings at any of the
+    configurations ``q`` (``(n_dofs,)`` or ``(rows, n_dofs)``; rows that are not finite are
+    skipped). Nothing happens inside a trace."""
+    if isinstance(q, jax.core.Tracer):
+        return
+    keys = {
+        i: (i, t.segment, t.s, t.bowden, t.guides)
+        for i, t in enumerate(scene.tendons)
+        if t.routing == "rings"
+    }
+    if not keys or all(k in _warned for k in keys.values()):
+        return
+    rows = np.asarray(q).reshape(-1, scene.n_dofs)
+    rows = rows[np.all(np.isfinite(rows), axis=1)]
+    worst = np.zeros(scene.n_tendons)
+    for start in range(0, len(rows), _ROWS):
+        chunk = rows[start : start + _ROWS]
+        padded = np.zeros((_ROWS, scene.n_dofs), chunk.dtype)
+        padded[: len(chunk)] = chunk
+        worst = np.maximum(worst, np.asarray(_worst_sag(scene, jnp.asarray(padded))))
+    for i, key in keys.items():
+        if worst[i] > SAG_TOLERANCE and key not in _warned:
+            _warned.add(key)
+            n_rings = len(scene.tendons[i].guides)
+            warnings.warn(
+                f"Scene.tendons[{i}]: its chords sag up to {worst[i]:.0%} of its offset below a "
+                f"channel through the same rings ({n_rings} rings per segment are sparse for "
+                "this curvature): if the tendon runs in a continuous channel use "
+                "routing='channel', else add rings (pacjax.SparseRingsWarning)",
+                SparseRingsWarning,
+                stacklevel=3,
+            )
