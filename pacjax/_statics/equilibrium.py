@@ -85,6 +85,7 @@ def make_solver(scene: Scene, opts: SolverOptions, dtype) -> PseudoTransientCont
         symmetric=scene.is_conservative,
         frozen_work=not scene.is_conservative,
         structured=opts.hessian == "structured",
+        newton_start=scene.model.newton_from_start(),
     )
 
 

@@ -21,6 +21,10 @@ class SolverOptions(eqx.Module):
         tol: tolerance on the scaled residual (see :class:`pacjax.Equilibrium`); default 1e-10.
         max_steps: maximum continuation steps per escape attempt; default 100.
         initial_dt: first pseudo-time step, in units of the elastic relaxation time; default 1.
+            With strain coordinates (``PolynomialCurvature``) a conservative solve whose
+            stiffness at the start is positive definite first takes Newton steps, and starts
+            the continuation from ``initial_dt`` at the first step that is shortened or rejected
+            (:meth:`pacjax.StrainModel.newton_from_start`).
         max_dt: largest pseudo-time step (Newton beyond it); default 1e12.
         escapes: how many times a converged saddle is left along its negative-curvature
             direction and continued again (0: report saddles as they are); default 2.

@@ -159,6 +159,12 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
     # ``E(y') - Q(y) . (y' - y)``, the energy with the non-conservative forces frozen at ``y``
     # (its gradient at ``y`` is ``r``). When False the merit is ``|r|^2 / 2``.
     frozen_work: bool = False
+    # When True, a conservative solve whose stiffness at the start is positive definite takes
+    # Newton steps (dt = max_dt) for as long as each is taken at full length; the first that is
+    # shortened or rejected hands over to the continuation from initial_dt. For strain
+    # coordinates in which Newton's method converges from the straight start (not the polar
+    # ones of PCC/PAC: StrainModel.newton_from_start).
+    newton_start: bool = False
 
     @property
     def _frozen(self) -> bool:
@@ -392,12 +398,12 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
         def keep(a, b):
             return jnp.where(accept, a, b)
 
-        dt = self._next_dt(state, new.residual, alpha, accept, first, escape)
         jac = keep(new.jacobian, state.jacobian)
         eigvals, eigvecs, escape_dy = stiffness_modes(
             jac, new.weights, self.escape_size, self.stability_tol
         )
         eig = eigvals[0]
+        dt = self._next_dt(state, new.residual, alpha, accept, first, escape, eig)
         code = jnp.where(first & ~finite, NONFINITE, state.code)
         # Stalled: even at the smallest pseudo-time step no step of any length lowers the merit
         # (the flow direction is not a descent direction of |r|^2 where the Jacobian of a
@@ -429,21 +435,32 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
             code=code,
         )
 
-    def _next_dt(self, state: PTCState, r_new, alpha, accept, first, escape):
+    def _next_dt(self, state: PTCState, r_new, alpha, accept, first, escape, eig):
         """The pseudo-time step for the next iteration (switched evolution relaxation).
 
         After an accepted full step ``dt`` grows by the fall of the residual (within
         ``_DT_GROWTH``, up to ``max_dt``); after an accepted shortened step it stays; after a
-        rejected one it shrinks tenfold; on the first step and an escape it restarts at
-        ``initial_dt``.
+        rejected one it shrinks tenfold; on an escape it restarts at ``initial_dt``, and on the
+        first step too, unless ``newton_start`` holds and the stiffness ``eig`` there is
+        positive: then ``max_dt`` (Newton), until a step is shortened or rejected, when it
+        restarts at ``initial_dt``.
         """
         dtype = state.dt.dtype
         ratio = max_abs(state.residual) / jnp.maximum(max_abs(r_new), jnp.finfo(dtype).tiny)
+        full = accept & (alpha == 1.0)
         grown = jnp.minimum(state.dt * jnp.clip(ratio, *_DT_GROWTH), self.max_dt)
+        start = self.initial_dt
+        if self.newton_start and self.symmetric:
+            start = jnp.where(eig > self.stability_tol, self.max_dt, self.initial_dt)
+        newton_ended = (state.dt >= self.max_dt) & ~full
         return jnp.where(
-            escape | first,
-            self.initial_dt,
-            jnp.where(accept & (alpha == 1.0), grown, jnp.where(accept, state.dt, 0.1 * state.dt)),
+            first,
+            start,
+            jnp.where(
+                escape | newton_ended,
+                self.initial_dt,
+                jnp.where(full, grown, jnp.where(accept, state.dt, 0.1 * state.dt)),
+            ),
         ).astype(dtype)
 
     def terminate(self, fn, y, args, options, state: PTCState, tags):

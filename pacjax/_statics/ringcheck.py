@@ -36,9 +36,9 @@ _warned: set = set()
 
 
 def warn_sparse_rings(scene, q) -> None:
-    """Warn, once per tendon (its index and routing), when the chords of a ring-routed tendon sag more than
-    :data:`SAG_TOLERANCE` of its offset below a channel through its rings at any of the
-    configurations ``q`` (``(n_dofs,)`` or ``(rows, n_dofs)``; rows that are not finite are
+    """Warn, once per tendon (its index and routing), when the chords of a ring-routed tendon
+    sag more than :data:`SAG_TOLERANCE` of its offset below a channel through its rings at any
+    of the configurations ``q`` (``(n_dofs,)`` or ``(rows, n_dofs)``; rows that are not finite are
     skipped). Nothing happens inside a trace."""
     if isinstance(q, jax.core.Tracer):
         return
