@@ -169,7 +169,10 @@ def tentacle(
 
     Section stiffness from the material: ``EI = E pi r^4 / 4``, ``GJ = EI / (1 + nu)``,
     ``rho A = rho pi r^2`` at each piece's base (the taper scales them with ``r^4`` and ``r^2``),
-    and the end-load axial stiffness of a linear taper, ``E pi r0 r1 / L``.
+    and the axial stiffness of a uniform stretch along the taper, ``int EA ds / L^2 = E pi
+    mean(r^2) / L`` (the segment's one elongation coordinate stretches it uniformly; the
+    end-load stiffness ``E pi r0 r1 / L`` of a rod whose strain varies is 27 % softer for the
+    first piece).
 
     Args:
         model: strain model (default :class:`PAC`, frame ``"torsion_free"``).
@@ -190,7 +193,10 @@ def tentacle(
             Segment(
                 length=length,
                 bending_stiffness=bending,
-                axial_stiffness=young_modulus * math.pi * r0 * r1 / length,
+                axial_stiffness=young_modulus
+                * math.pi
+                * (r0 * r0 + r0 * r1 + r1 * r1)
+                / (3.0 * length),
                 torsion_stiffness=bending / (1.0 + poisson),
                 linear_density=density * math.pi * r0**2,
                 radius=r0,
