@@ -4,7 +4,10 @@ and a tip force, each with PAC (polar) and ``PolynomialCurvature(1)`` (the same 
 curvature in strain coordinates). Counts are the solver's ``steps`` (the first linearisation
 at the start included), so they do not depend on the machine.
 
-Usage: python benchmarks/solver_steps.py [rows] [out.json]
+Usage: python benchmarks/solver_steps.py [rows] [out.json] [--continuation-only]
+
+``--continuation-only``: the baseline, every strain model starting the continuation from
+``initial_dt`` (no Newton start, :meth:`pacjax.StrainModel.newton_from_start` False).
 """
 
 import json
@@ -61,6 +64,7 @@ def main(rows: int = 1000, out: str | None = None) -> dict:
         ).stdout.strip(),
         "jax": jax.__version__,
         "rows": rows,
+        "newton_start": pj.PolynomialCurvature(1).newton_from_start(),
         "cases": {},
     }
     for name, scene, controls, extra in cases(rows):
@@ -85,5 +89,7 @@ def main(rows: int = 1000, out: str | None = None) -> dict:
 
 
 if __name__ == "__main__":
-    args = sys.argv[1:]
+    args = [a for a in sys.argv[1:] if a != "--continuation-only"]
+    if "--continuation-only" in sys.argv:
+        pj.StrainModel.newton_from_start = lambda self: False
     main(int(args[0]) if args else 1000, args[1] if len(args) > 1 else None)
