@@ -7,8 +7,10 @@ Usage: python benchmarks/program_sizes.py [out.json]
 The programs are captured on the entry points' own first calls (the single solve's
 ``solve_core``, the batch's ``_advance`` and ``_start_block``, identification's ``_evaluate``,
 the inverse solver's Levenberg-Marquardt ``_solve_core``) and traced again here, so they are
-exactly what a user's call compiles. ``trace_s`` is that second trace (JAX reuses the traces of
-inner functions, so it understates a fresh process's: ``first_run.py`` measures those).
+exactly what a user's call compiles (the single solve's program is ``solve_core`` with the ring
+chords' sag at the solution, ``_solve_checked``). ``trace_s`` is that second trace (JAX reuses
+the traces of inner functions, so it understates a fresh process's: ``first_run.py`` measures
+those).
 """
 
 import json
@@ -76,7 +78,7 @@ def measure(captured: dict, name: str) -> dict:
 
 def main(out_path: str | None = None) -> dict:
     captured: dict = {}
-    capture(equilibrium, "_solve", captured)
+    capture(equilibrium, "_solve_checked", captured)
     capture(pool, "_advance", captured)
     capture(pool, "_start_block", captured)
     capture(identify_problem, "_evaluate", captured, stop=True)
@@ -98,7 +100,7 @@ def main(out_path: str | None = None) -> dict:
         pass
 
     labels = {
-        "solve: solve_core": "_solve",
+        "solve: solve_core": "_solve_checked",
         "batch: _advance": "_advance",
         "batch: _start_block": "_start_block",
         "identify: _evaluate": "_evaluate",

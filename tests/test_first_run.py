@@ -134,7 +134,7 @@ def _solve_with_cache(root) -> dict:
 
 def test_cache_is_written_read_back_and_survives_a_damaged_entry(tmp_path):
     first = _solve_with_cache(tmp_path)
-    entries = sorted(p for p in os.listdir(first["directory"]) if "solve_core" in p)
+    entries = sorted(p for p in os.listdir(first["directory"]) if "solve_and_sag" in p)
     assert first["converged"] and entries, os.listdir(first["directory"])
     second = _solve_with_cache(tmp_path)
     assert second["hits"] > 0 and second["q"] == first["q"]

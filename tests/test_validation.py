@@ -26,6 +26,7 @@ def no_solver(monkeypatch):
         raise AssertionError("the solver was reached: the input was not rejected beforehand")
 
     monkeypatch.setattr(equilibrium_module, "_solve", spy)
+    monkeypatch.setattr(equilibrium_module, "_solve_checked", spy)
     monkeypatch.setattr(batch_module, "_solve_chunk", spy)
 
 

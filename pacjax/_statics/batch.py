@@ -37,7 +37,7 @@ from .continuation import conservative_part, retry_failed
 from .equilibrium import solve_core
 from .options import SolverOptions, resolve_options
 from .pool import pad_rows, pool_lanes, pool_slots, pool_solve
-from .ringcheck import warn_sparse_rings
+from .ringcheck import check_rows
 from .solution import Equilibrium
 
 
@@ -119,7 +119,7 @@ def iter_batch(
             u = controls_batch[part.rows]
             p = None if params is None else jtu.tree_map(lambda x, r=part.rows: x[r], params)
             eq = _retry_failed(scene, u, part.q_start, p, update, opts, eq, dtype, fallback)
-        warn_sparse_rings(scene, eq.q)
+        check_rows(scene, eq.q)
         yield part.rows, eq
 
 

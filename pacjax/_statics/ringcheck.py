@@ -35,19 +35,21 @@ def _worst_sag(scene, q):
 _warned: set = set()
 
 
-def warn_sparse_rings(scene, q) -> None:
-    """Warn, once per tendon (its index and routing), when the chords of a ring-routed tendon
-    sag more than :data:`SAG_TOLERANCE` of its offset below a channel through its rings at any
-    of the configurations ``q`` (``(n_dofs,)`` or ``(rows, n_dofs)``; rows that are not finite are
-    skipped). Nothing happens inside a trace."""
-    if isinstance(q, jax.core.Tracer):
-        return
+def _unwarned(scene) -> dict:
+    """Ring-routed tendons not warned about yet: index -> key (its index and routing)."""
     keys = {
         i: (i, t.segment, t.s, t.bowden, t.guides)
         for i, t in enumerate(scene.tendons)
         if t.routing == "rings"
     }
-    if not keys or all(k in _warned for k in keys.values()):
+    return {i: k for i, k in keys.items() if k not in _warned}
+
+
+def check_rows(scene, q) -> None:
+    """:func:`warn_sparse_rings` at the configurations ``q`` (``(rows, n_dofs)``; rows that are
+    not finite are skipped), computed here in chunks of :data:`_ROWS` (one compiled program
+    per scene structure). Nothing happens inside a trace."""
+    if isinstance(q, jax.core.Tracer) or not _unwarned(scene):
         return
     rows = np.asarray(q).reshape(-1, scene.n_dofs)
     rows = rows[np.all(np.isfinite(rows), axis=1)]
@@ -57,15 +59,26 @@ def warn_sparse_rings(scene, q) -> None:
         padded = np.zeros((_ROWS, scene.n_dofs), chunk.dtype)
         padded[: len(chunk)] = chunk
         worst = np.maximum(worst, np.asarray(_worst_sag(scene, jnp.asarray(padded))))
-    for i, key in keys.items():
-        if worst[i] > SAG_TOLERANCE and key not in _warned:
+    warn_sparse_rings(scene, worst)
+
+
+def warn_sparse_rings(scene, sag) -> None:
+    """Warn, once per tendon (its index and routing), when the chords of a ring-routed tendon
+    sag more than :data:`SAG_TOLERANCE` of its offset below a channel through its rings
+    (``sag``: :func:`pacjax._model.channels.ring_chord_sag` at a solution, or its largest over
+    several). Nothing happens inside a trace."""
+    if isinstance(sag, jax.core.Tracer):
+        return
+    sag = np.asarray(sag)
+    for i, key in _unwarned(scene).items():
+        if sag[i] > SAG_TOLERANCE:
             _warned.add(key)
             n_rings = len(scene.tendons[i].guides)
             warnings.warn(
-                f"Scene.tendons[{i}]: its chords sag up to {worst[i]:.0%} of its offset below a "
+                f"Scene.tendons[{i}]: its chords sag up to {sag[i]:.0%} of its offset below a "
                 f"channel through the same rings ({n_rings} rings per segment are sparse for "
                 "this curvature): if the tendon runs in a continuous channel use "
                 "routing='channel', else add rings (pacjax.SparseRingsWarning)",
                 SparseRingsWarning,
-                stacklevel=3,
+                stacklevel=4,
             )
