@@ -76,6 +76,19 @@ def test_length_is_the_arc_length_of_the_tendon_curve(model):
     np.testing.assert_allclose(scene.tendon_lengths(q), dense.tendon_lengths(q), rtol=1e-12)
 
 
+def test_float32_lengths_and_derivatives_follow_float64():
+    scene = pj.Scene(_robot(), pj.PAC(), _tendons())
+    single = pj.astype(scene, jnp.float32)
+    for q in (scene.zeros(), _bent(scene)):
+        q32 = q.astype(jnp.float32)
+        np.testing.assert_allclose(
+            single.tendon_lengths(q32), scene.tendon_lengths(q32.astype(float)), rtol=2e-6
+        )
+        jac32 = jax.jacfwd(single.tendon_lengths)(q32)
+        jac64 = jax.jacfwd(scene.tendon_lengths)(q32.astype(float))
+        np.testing.assert_allclose(jac32, jac64, atol=2e-6 * float(jnp.max(jnp.abs(jac64))))
+
+
 def test_length_derivatives_against_finite_differences():
     scene = pj.Scene(_robot(), pj.PAC(), _tendons())
     q = _bent(scene)
