@@ -160,8 +160,8 @@ class PlanarCurvature(StrainModel):
 
     def newton_from_start(self) -> bool:
         # Polar coordinates: near straight the energy along the plane angle scales with the
-        # curvature, and a Newton step swings the plane far past the solution (the paper's
-        # robot with PAC: 13.8 steps a solve instead of 6.4 with continuation from the start).
+        # curvature, and a Newton step swings the plane far past the solution (more steps in
+        # all than the continuation from the start: benchmarks/RESULTS.md).
         return False
 
     def free_plane_angle(self) -> int | None:

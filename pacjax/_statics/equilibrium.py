@@ -154,8 +154,8 @@ def solve_core_linearised(scene: Scene, controls, q0, opts: SolverOptions):
 
 
 def _solve_and_sag(scene: Scene, controls, q0, opts: SolverOptions):
-    """:func:`solve_core` and the ring chords' sag at the solution (in the same program: as a
-    program of its own its call cost a third of a warm single solve)."""
+    """:func:`solve_core` and the ring chords' sag at the solution, in one program: a second
+    compiled call per solve would cost a warm single solve a noticeable fraction of its time."""
     eq = solve_core(scene, controls, q0, opts)
     return eq, ring_chord_sag(scene, eq.q)
 

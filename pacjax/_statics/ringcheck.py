@@ -1,11 +1,9 @@
 """The warning that a ring-routed tendon's rings are too sparse for the curvature a solve
 reached: a tendon that runs in a continuous channel, modelled by rings, gets the chords' shorter
-moment arm (:func:`pacjax._model.channels.ring_chord_sag`).
-
-On the tentacle of ``shared/data/soromox_tentacle`` modelled with rings along its channels, at
-tensions of the data's range, the chords sagged up to 17-69 % of the offset with 11 rings per
-segment (markers 8-118 mm from the channel model), 4-12 % with 21, 1-3 % with 41 (0.4-3.9 mm)
-and 0.3-0.7 % with 81; the paper's ring-stacked robot reaches 0.2-0.4 % (9 random commands).
+moment arm (:func:`pacjax._model.channels.ring_chord_sag`). The tolerance separates the
+tentacle of ``shared/data/soromox_tentacle`` modelled with up to 41 rings along its channels
+(markers millimetres to decimetres from the channel model) from the paper's ring-stacked robot
+(``benchmarks/RESULTS.md``, "Tendon channels").
 """
 
 import warnings
