@@ -72,8 +72,11 @@ What still differs (the tip differences measure it):
 - with rings instead of a channel, the tendon is a chain of chords, not the channel's curve
   (41 rings: tips up to 4.4 mm from SoRoMoX's on 16 rows of (a)).
 
-``pj.presets.tentacle`` is the same robot (its axial stiffness is ``E pi mean(r^2) / L`` too);
-the script builds its own scene to set the two problems' numbers side by side.
+``pj.presets.tentacle`` is the same robot but for its axial stiffness, ``E pi r0 r1 / L`` (the
+end-load stiffness of a tapered rod: the least energy of any strain along it with the same total
+elongation); SoRoMoX's uniform stretch is ``E pi mean(r^2) / L``, 27 % stiffer for piece 1, and
+the tendons compress the body by up to ~2 cm: with the preset the tips lie up to 7.6 mm from
+SoRoMoX's (16 rows of (a)), hence this script's own scene.
 
 Measured per library, problem and batch size: compile time (first call minus the median warm
 call), warm equilibria per second (median of ``--repeats`` warm calls, the libraries

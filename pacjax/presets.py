@@ -169,10 +169,10 @@ def tentacle(
 
     Section stiffness from the material: ``EI = E pi r^4 / 4``, ``GJ = EI / (1 + nu)``,
     ``rho A = rho pi r^2`` at each piece's base (the taper scales them with ``r^4`` and ``r^2``),
-    and the axial stiffness of a uniform stretch along the taper, ``int EA ds / L^2 = E pi
-    mean(r^2) / L`` (the segment's one elongation coordinate stretches it uniformly; the
-    end-load stiffness ``E pi r0 r1 / L`` of a rod whose strain varies is 27 % softer for the
-    first piece).
+    and the axial stiffness of a linear taper under an end load, ``E pi r0 r1 / L`` (``1 / int
+    ds / EA``: the least elastic energy of any axial strain along the piece with the same total
+    elongation, which is what the one elongation coordinate measures; a uniform stretch, as in
+    SoRoMoX's strain basis, is 27 % stiffer for the first piece).
 
     Args:
         model: strain model (default :class:`PAC`, frame ``"torsion_free"``).
@@ -193,10 +193,7 @@ def tentacle(
             Segment(
                 length=length,
                 bending_stiffness=bending,
-                axial_stiffness=young_modulus
-                * math.pi
-                * (r0 * r0 + r0 * r1 + r1 * r1)
-                / (3.0 * length),
+                axial_stiffness=young_modulus * math.pi * r0 * r1 / length,
                 torsion_stiffness=bending / (1.0 + poisson),
                 linear_density=density * math.pi * r0**2,
                 radius=r0,
