@@ -171,10 +171,21 @@ def test_example_loads_and_solves(path):
         assert tip[0] > 0.01  # pushed along the tip's local +x
     elif path.stem == "stella2023":
         assert tip[2] < -0.3  # hanging down
+    elif path.stem == "tentacle_channels":
+        # The same robot as the preset; tendon 0 pulls the tip towards world +y.
+        same = pj.solve_equilibrium(pj.presets.tentacle(), controls)
+        np.testing.assert_allclose(eq.q, same.q, atol=1e-5)
+        assert tip[1] > 0.01
 
 
 def test_examples_exist():
-    assert {p.stem for p in EXAMPLES} >= {"stella2023", "cantilever", "tendon_single", "follower"}
+    assert {p.stem for p in EXAMPLES} >= {
+        "stella2023",
+        "cantilever",
+        "tendon_single",
+        "follower",
+        "tentacle_channels",
+    }
 
 
 # ------------------------------------------------------------------------------ errors
