@@ -66,11 +66,11 @@ class ChannelRouting:
 
         radius = ends(
             [t.offset for t in chosen],
-            [t.offset if t.offset_end is None else t.offset_end for t in chosen],
+            [t.anchor_offset for t in chosen],
         )
         angle = ends(
             [t.angle for t in chosen],
-            [t.angle if t.angle_end is None else t.angle_end for t in chosen],
+            [t.anchor_angle for t in chosen],
         )
         n = self.span.shape[0]
         return {
@@ -174,7 +174,7 @@ def ring_chord_sag(scene, q: Float[Array, " n_dofs"]) -> Float[Array, " m"]:
     turn = jax.ops.segment_sum(turn, layout.stretch, num_segments=n)
     arc = jax.ops.segment_sum(arc, layout.stretch, num_segments=n)
     start = jnp.stack([t.offset for t in scene.tendons]).astype(dtype)
-    end = jnp.stack([t.offset if t.offset_end is None else t.offset_end for t in scene.tendons])
+    end = jnp.stack([t.anchor_offset for t in scene.tendons])
     owner = layout.owner
     offset = start[owner] + (end.astype(dtype) - start)[owner] * jnp.asarray(layout.middle, dtype)
     sag = arc * turn / (8.0 * offset)

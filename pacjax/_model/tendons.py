@@ -143,6 +143,16 @@ class Tendon(eqx.Module):
             check_positive("Tendon.gain", self.gain)
 
     @property
+    def anchor_offset(self) -> Float[Array, ""]:
+        """Radial distance (m) at the anchor: ``offset_end``, or ``offset`` when not tapered."""
+        return self.offset if self.offset_end is None else self.offset_end
+
+    @property
+    def anchor_angle(self) -> Float[Array, ""]:
+        """Angle (rad) at the anchor: ``angle_end``, or ``angle`` when not helical."""
+        return self.angle if self.angle_end is None else self.angle_end
+
+    @property
     def entry_segment(self) -> int:
         """The segment at whose base the tendon enters the body."""
         return self.segment if self.bowden else 0
@@ -206,7 +216,7 @@ class TendonRouting:
         """Guide point offsets (m) in their cross-section frames."""
         angle = jnp.stack([t.angle for t in tendons]).astype(dtype)[self.point_tendon]
         start = jnp.stack([t.offset for t in tendons]).astype(dtype)
-        end = jnp.stack([t.offset if t.offset_end is None else t.offset_end for t in tendons])
+        end = jnp.stack([t.anchor_offset for t in tendons])
         frac = jnp.asarray(self.point_route_fraction, dtype)
         radius = start[self.point_tendon] + (end.astype(dtype) - start)[self.point_tendon] * frac
         return jnp.stack(
