@@ -121,3 +121,9 @@ def test_known_load_site_is_static_and_agrees_with_a_traced_site(scene):
     # The two kinematics paths agree to their quadrature accuracy (~1e-9 relative).
     np.testing.assert_allclose(traced(jnp.asarray(0.6)), known.q, atol=1e-7)
     assert known.converged
+
+
+def test_batch_under_a_trace_says_to_vmap_the_single_solve():
+    scene = pj.presets.tentacle()
+    with pytest.raises(TypeError, match=r"jax.vmap\(pj.solve_equilibrium\)"):
+        jax.grad(lambda u: jnp.sum(pj.solve_batch(scene, u).q))(jnp.ones((2, 2)))

@@ -89,6 +89,7 @@ def iter_batch(
     drop it. Arguments as :func:`solve_batch`.
     """
     check_scene(scene)
+    _check_not_traced(scene, controls_batch, q0, params)
     if isinstance(chunk_size, bool) or not isinstance(chunk_size, (int, np.integer)):
         raise TypeError(f"chunk_size must be an integer, got {chunk_size!r}")
     if chunk_size < 1:
@@ -121,6 +122,17 @@ def iter_batch(
             eq = _retry_failed(scene, u, part.q_start, p, update, opts, eq, dtype, fallback)
         check_rows(scene, eq.q)
         yield part.rows, eq
+
+
+def _check_not_traced(*trees) -> None:
+    """The batch solver runs its pool from Python, chunk by chunk: it cannot be traced."""
+    leaves = jtu.tree_leaves(trees)
+    if any(isinstance(x, jax.core.Tracer) for x in leaves):
+        raise TypeError(
+            "solve_batch/iter_batch cannot be traced (jax.jit, jax.grad, jax.vmap): they run "
+            "their solver pool from Python; for a traced or differentiated batch use "
+            "jax.vmap(pj.solve_equilibrium)"
+        )
 
 
 def _check_params(params, update, n: int):
