@@ -142,7 +142,6 @@ class RingStretches:
         self.stretch = np.asarray(stretch, np.int32)
         self.owner = np.asarray(owner, np.int32)
         self.middle = np.asarray(middle, float)
-        self.n_tendons = len(tendons)
 
     def __bool__(self):
         return len(self.owner) > 0

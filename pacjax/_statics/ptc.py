@@ -449,10 +449,10 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
         ratio = max_abs(state.residual) / jnp.maximum(max_abs(r_new), jnp.finfo(dtype).tiny)
         full = accept & (alpha == 1.0)
         grown = jnp.minimum(state.dt * jnp.clip(ratio, *_DT_GROWTH), self.max_dt)
-        start = self.initial_dt
+        start, newton_ended = self.initial_dt, jnp.asarray(False)
         if self.newton_start and self.symmetric:
             start = jnp.where(eig > self.stability_tol, self.max_dt, self.initial_dt)
-        newton_ended = (state.dt >= self.max_dt) & ~full
+            newton_ended = (state.dt >= self.max_dt) & ~full
         return jnp.where(
             first,
             start,
