@@ -146,7 +146,9 @@ def test_documented_examples_parse():
     assert len(blocks) == 2
     full, preset = (scene_from_toml(textwrap.dedent(b), source="docstring") for b in blocks)
     scene, controls, extra = full
-    assert (scene.n_segments, scene.n_tendons, len(scene.loads)) == (2, 1, 4)
+    assert (scene.n_segments, scene.n_tendons, len(scene.loads)) == (3, 1, 4)
+    assert scene.segment_models[2] == pj.PCC(phi_stiffness=1e-3)
+    assert not scene.robot.segments[2].extensible and scene.n_dofs == 2 * 4 + 2
     assert controls.shape == (1,) and extra["solver"] == {"tol": 1e-10, "max_steps": 100}
     assert preset[0].n_tendons == 9 and preset[2]["preset"] == "stella2023"
 

@@ -96,7 +96,7 @@ class _Model(eqx.Module):
     def build(scene: Scene, damping: Damping, phi_inertia: float, dtype) -> "_Model":
         passive = Scene(
             scene.robot,
-            scene.model,
+            scene.models,
             loads=scene.loads,
             quadrature_points=scene.quadrature_points,
             rotation_substeps=scene.rotation_substeps,

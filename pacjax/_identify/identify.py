@@ -447,7 +447,7 @@ def _fitted_scene(fitted: Scene, fit_scene: Scene, sites, offsets) -> Scene:
     """The fitted scene: the user's structure (no per-frame loads), fitted marker offsets."""
     return Scene(
         fitted.robot,
-        fitted.model,
+        fitted.models,
         tendons=fitted.tendons,
         loads=fit_scene.loads,
         markers=tuple(

@@ -59,6 +59,11 @@ def high_fidelity(
             "subdivisions > 1 is not possible with Bowden tendons (a Bowden tendon enters at the "
             "base of its own segment); use subdivisions=1 and a higher-order model"
         )
+    if any(seg.rest_curvature is not None for seg in scene.robot.segments):
+        raise ValueError(
+            "high_fidelity: a segment has a rest_curvature, which is written in the scene's "
+            "strain model's coordinates and has no counterpart in another model or on pieces"
+        )
     segments = []
     for seg in scene.robot.segments:
         law = seg.stiffening
@@ -77,20 +82,22 @@ def high_fidelity(
 
 def _segment_piece(seg: Segment, j: int, n: int, law) -> Segment:
     """Piece ``j`` of ``n`` of a segment, with the stiffening law ``law``."""
-    tapered = seg.radius_tip is not None
+    start, end = np.asarray(j / n), np.asarray((j + 1) / n)
+    bending = seg.bending_profile(start)
+    density = seg.area_profile(start)
     return Segment(
         length=seg.length / n,
-        bending_stiffness=seg.bending_stiffness
-        * (seg.section_scale(np.asarray(j / n)) ** 4 if tapered else 1.0),
+        bending_stiffness=seg.bending_stiffness * (1.0 if bending is None else bending),
         axial_stiffness=seg.axial_stiffness * n,
-        torsion_stiffness=seg.torsion_stiffness
-        * (seg.section_scale(np.asarray(j / n)) ** 4 if tapered else 1.0),
-        linear_density=seg.linear_density
-        * (seg.section_scale(np.asarray(j / n)) ** 2 if tapered else 1.0),
-        radius=seg.radius_at(np.asarray(j / n)),
-        radius_tip=seg.radius_at(np.asarray((j + 1) / n)) if tapered else None,
+        torsion_stiffness=seg.torsion_stiffness * (1.0 if bending is None else bending),
+        linear_density=seg.linear_density * (1.0 if density is None else density),
+        radius=seg.radius_at(start),
+        radius_tip=seg.radius_at(end) if seg.tapered else None,
+        inner_radius=seg.inner_radius_at(start),
+        inner_radius_tip=seg.inner_radius_at(end) if seg.tapered else None,
         stiffening=law,
         contraction_limit=seg.contraction_limit / n,
+        extensible=seg.extensible,
     )
 
 

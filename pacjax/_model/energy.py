@@ -20,10 +20,10 @@ def section_stiffness(
     nodes = jnp.asarray(gauss_legendre(quadrature_points)[0], dtype)
     bending = segment.bending_stiffness.astype(dtype) * jnp.ones_like(nodes)
     torsion = segment.torsion_stiffness.astype(dtype) * jnp.ones_like(nodes)
-    scale = segment.section_scale(nodes)
-    if scale is not None:
-        bending = bending * scale**4
-        torsion = torsion * scale**4
+    profile = segment.bending_profile(nodes)
+    if profile is not None:
+        bending = bending * profile
+        torsion = torsion * profile
     return bending, torsion
 
 
@@ -55,21 +55,28 @@ def segment_elastic_energy(
     q: Float[Array, " d"],
     quadrature_points: int,
     stiffness: tuple[Float[Array, " p"], Float[Array, " p"]] | None = None,
+    rest: Float[Array, " d"] | None = None,
 ) -> Float[Array, ""]:
     """Elastic energy (J) of one segment.
 
-    ``1/2 int_0^1 (EI(s) |u_bend(s)|^2 + GJ(s) u_twist(s)^2) / L ds + 1/2 k_a dL^2`` plus the
-    model's energy on non-strain coordinates (PAC's ``1/2 k_phi phi^2``). With constant
-    stiffness and PAC's affine curvature this is exactly the paper's Hankel form
-    ``1/2 k_b [c0 c1] H [c0 c1]^T``, ``k_b = EI / L``; a taper makes ``H`` the weighted Gram
-    matrix. Gauss-Legendre with ``n`` points is exact up to polynomial degree ``2 n - 1``.
-    ``stiffness``: :func:`section_stiffness`, when already computed.
+    ``1/2 int_0^1 (EI(s) |u_bend(s) - u0_bend(s)|^2 + GJ(s) (u_twist(s) - u0_twist(s))^2) / L
+    ds + 1/2 k_a dL^2`` plus the model's energy on non-strain coordinates (PAC's
+    ``1/2 k_phi phi^2``), with ``u0`` the strain of the rest coordinates ``rest`` (None:
+    straight). With constant stiffness, no rest curvature and PAC's affine curvature this is
+    exactly the paper's Hankel form ``1/2 k_b [c0 c1] H [c0 c1]^T``, ``k_b = EI / L``; a taper
+    makes ``H`` the weighted Gram matrix. Gauss-Legendre with ``n`` points is exact up to
+    polynomial degree ``2 n - 1``. ``stiffness``: :func:`section_stiffness`, when already
+    computed.
     """
     elongation = model.elongation(q)
     nodes, weights, length, bending, torsion = _section_at(
         segment, quadrature_points, stiffness, elongation, q.dtype
     )
     strain = jax.vmap(model.strain, in_axes=(None, 0))(q, nodes)
+    if rest is not None:
+        # The strain's difference, not the coordinates': PCC/PAC's are polar.
+        strain = strain - jax.vmap(model.strain, in_axes=(None, 0))(rest, nodes)
+        q = q - rest  # the non-strain coordinates' energy, from their rest values
     energy = _bending_torsion_energy(model, length, weights, bending, torsion, strain)
     extra = model.coordinate_energy(q, segment.torsion_stiffness.astype(q.dtype) / length)
     if extra is not None:
@@ -149,7 +156,10 @@ def _sum_over_segments(per_segment, robot: Robot, quadrature_points, stiffness, 
     segments = robot.segments
     if stiffness is None:
         stiffness = robot_section_stiffness(robot, quadrature_points, arrays[0].dtype)
-    structures = {jtu.tree_structure(seg) for seg in segments}
+    structures = {
+        (jtu.tree_structure(seg), tuple(jnp.shape(x) for x in jtu.tree_leaves(seg)))
+        for seg in segments
+    }
     if len(structures) == 1:
         stacked = jtu.tree_map(lambda *xs: jnp.stack(xs), *segments)
         return jnp.sum(jax.vmap(per_segment)(stacked, *arrays, stiffness))
@@ -165,16 +175,24 @@ def elastic_energy(
     q: Float[Array, "n d"],
     quadrature_points: int,
     stiffness: tuple[Float[Array, "n p"], Float[Array, "n p"]] | None = None,
+    rest: Float[Array, "n d"] | None = None,
 ) -> Float[Array, ""]:
     """Elastic energy (J) of all segments: one ``vmap`` when they share a structure.
 
-    ``stiffness``: every segment's :func:`section_stiffness`, stacked, when already computed.
+    ``stiffness``: every segment's :func:`section_stiffness`, stacked, when already computed;
+    ``rest``: every segment's rest coordinates (None: straight).
     """
+    if rest is None:
 
-    def one(seg, qi, k):
-        return segment_elastic_energy(model, seg, qi, quadrature_points, k)
+        def one(seg, qi, k):
+            return segment_elastic_energy(model, seg, qi, quadrature_points, k)
 
-    return _sum_over_segments(one, robot, quadrature_points, stiffness, q)
+        return _sum_over_segments(one, robot, quadrature_points, stiffness, q)
+
+    def one_from_rest(seg, qi, ri, k):
+        return segment_elastic_energy(model, seg, qi, quadrature_points, k, ri)
+
+    return _sum_over_segments(one_from_rest, robot, quadrature_points, stiffness, q, rest)
 
 
 def strain_rate_energy(
@@ -213,9 +231,9 @@ def gravity_masses(
     segs, ss, masses = [], [], []
     for i, seg in enumerate(robot.segments):
         density = seg.linear_density.astype(dtype) * jnp.ones(len(nodes), dtype)
-        scale = seg.section_scale(jnp.asarray(nodes, dtype))
-        if scale is not None:
-            density = density * scale**2
+        profile = seg.area_profile(jnp.asarray(nodes, dtype))
+        if profile is not None:
+            density = density * profile
         masses.append(jnp.asarray(weights, dtype) * density * seg.length.astype(dtype))
         segs.extend([i] * len(nodes))
         ss.extend(nodes.tolist())
@@ -247,9 +265,9 @@ def mass_beyond(robot: Robot, s, dtype) -> Array:
         si = jnp.asarray(s[i], dtype)
         v = si[..., None] + (1.0 - si[..., None]) * jnp.asarray(nodes, dtype)
         density = seg.linear_density.astype(dtype) * jnp.ones_like(v)
-        scale = seg.section_scale(v)
-        if scale is not None:
-            density = density * scale**2
+        profile = seg.area_profile(v)
+        if profile is not None:
+            density = density * profile
         integral = jnp.sum(jnp.asarray(weights, dtype) * density, axis=-1)
         out.append((1.0 - si) * integral * seg.length.astype(dtype))
     return jnp.stack(out)

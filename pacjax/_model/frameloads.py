@@ -69,7 +69,7 @@ def with_frame_loads(scene: Scene, dataset) -> tuple[Scene, FrameLoads]:
     # that differ only in their markers share one compiled solver.
     new = Scene(
         scene.robot,
-        scene.model,
+        scene.models,
         tendons=scene.tendons,
         loads=loads,
         quadrature_points=scene.quadrature_points,

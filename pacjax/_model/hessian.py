@@ -51,18 +51,20 @@ def _contract(jac, delta):
 
 
 def elastic_hessian(
-    scene: Scene, q: Float[Array, " n_dofs"], consts: SceneConstants
-) -> Float[Array, "n_dofs n_dofs"]:
-    """Hessian of the elastic energy, a sum of per-segment terms each in its own segment's
-    coordinates: block diagonal, so the ``d`` directions ``e_j`` taken in every segment at once
-    give all its blocks (``d`` forward derivatives of the gradient instead of ``n d``)."""
-    n, d = scene.n_segments, scene.dofs_per_segment
-    grad = jax.grad(scene.elastic_energy)
+    scene: Scene, coords: Float[Array, "n d"], consts: SceneConstants
+) -> Float[Array, "nd nd"]:
+    """Hessian of the elastic energy along the full per-segment layout (``coords``, pinned
+    coordinates included), a sum of per-segment terms each in its own segment's coordinates:
+    block diagonal, so the ``d`` directions ``e_j`` taken in every segment at once give all its
+    blocks (``d`` forward derivatives of the gradient instead of ``n d``)."""
+    n, d = coords.shape
+    x = coords.reshape(-1)
+    grad = jax.grad(lambda y: scene.coords_elastic_energy(y.reshape(n, d), consts))
 
     def column(tangent):
-        return jax.jvp(lambda x: grad(x, consts), (q,), (tangent,))[1]
+        return jax.jvp(grad, (x,), (tangent,))[1]
 
-    tangents = jnp.tile(jnp.eye(d, dtype=q.dtype), (1, n))
+    tangents = jnp.tile(jnp.eye(d, dtype=x.dtype), (1, n))
     columns = jax.vmap(column)(tangents).reshape(d, n, d)  # [j, i, k] = H_i[k, j]
     return jax.scipy.linalg.block_diag(*[columns[:, i].T for i in range(n)])
 
@@ -141,16 +143,18 @@ def energy_derivatives(
 
     ``consts``: :meth:`Scene.constants`, when already computed.
     """
-    n_dofs = q.shape[0]
     consts = scene.constants(q.dtype) if consts is None else consts
-    e_el, g_el = jax.value_and_grad(scene.elastic_energy)(q, consts)
-    h_el = elastic_hessian(scene, q, consts)
-    plan = scene.energy_plan()
-    if plan is None:
-        return e_el, g_el, h_el
-
     coords = scene.coordinates(q)
     n, d = coords.shape
+    # Along the full per-segment layout; the pinned coordinates are dropped at the end.
+    e_el, g_el = jax.value_and_grad(lambda x: scene.coords_elastic_energy(x.reshape(n, d), consts))(
+        coords.reshape(-1)
+    )
+    h_el = elastic_hessian(scene, coords, consts)
+    plan = scene.energy_plan()
+    if plan is None:
+        return e_el, *_free(scene, g_el, h_el)
+
     lin = _linearise(scene, coords, plan, consts, q.dtype)
     # Psi reads the knot frames at a few rows only (the segment ends and the world points), so
     # it is differentiated on those rows (the paper's robot with PAC reads 1 row of 10): the
@@ -183,7 +187,15 @@ def energy_derivatives(
     h_load = jax.hessian(psi_linear)(jnp.zeros(n * d, q.dtype))
     h_curv = _curvature(scene, coords, plan, lin, lam_seg, lam_traced)
     hessian = h_el + h_load + h_curv
-    return e_el + e_load, g_el + grad.reshape(n_dofs), hessian
+    return e_el + e_load, *_free(scene, g_el + grad.reshape(n * d), hessian)
+
+
+def _free(scene: Scene, grad, hessian):
+    """The gradient and Hessian along the coordinates (:meth:`Scene.free_coordinates`)."""
+    free = scene.free_coordinates()
+    if free is None:
+        return grad, hessian
+    return grad[free], hessian[np.ix_(free, free)]
 
 
 def _curvature(scene: Scene, coords, plan, lin: _Linearised, lam_seg, lam_traced):

@@ -52,17 +52,18 @@ _DISC = np.array([0.25, 0.25, 0.5])
 
 def _body_nodes(scene: Scene, dtype):
     """Gauss-Legendre nodes of every segment: static ``(segments, s)``, masses (kg) and
-    radii (m) as arrays."""
+    gyration radii (m: the radius of the solid disc with the section's moments) as arrays."""
     nodes, weights = gauss_legendre(scene.quadrature_points)
     segs, masses, radii = [], [], []
     for i, seg in enumerate(scene.robot.segments):
         s = jnp.asarray(nodes, dtype)
         density = seg.linear_density.astype(dtype) * jnp.ones_like(s)
-        scale = seg.section_scale(s)
-        if scale is not None:
-            density = density * scale**2
+        profile = seg.area_profile(s)
+        if profile is not None:
+            density = density * profile
         masses.append(jnp.asarray(weights, dtype) * density * seg.length.astype(dtype))
-        radii.append(seg.radius_at(s).astype(dtype))
+        # A hollow disc's moments per unit mass are a solid one's of radius^2 = r_o^2 + r_i^2.
+        radii.append(jnp.hypot(seg.radius_at(s), seg.inner_radius_at(s)).astype(dtype))
         segs += [i] * len(nodes)
     s_all = np.tile(nodes, scene.n_segments)
     return np.asarray(segs), s_all, jnp.concatenate(masses), jnp.concatenate(radii)
@@ -109,7 +110,7 @@ def coordinate_inertia(
     seg_mass = masses.reshape(scene.n_segments, -1).sum(axis=1)
     diag = jnp.zeros((scene.n_segments, d), dtype)
     diag = diag.at[:, d - 2].set(phi_inertia * seg_mass * lengths**2 / 12.0)
-    return diag.reshape(-1)
+    return scene.free_part(diag)
 
 
 def _vee_skew(a: Float[Array, "*b 3 3"]) -> Float[Array, "*b 3"]:

@@ -63,10 +63,10 @@ def check_q(
 ):
     """Coordinates checked against the scene (before any compilation): real, finite,
     ``(n_dofs,)``, or also ``(rows, n_dofs)`` when ``rows`` is given (returned broadcast to it,
-    as numpy). A ``start`` of a solve must not contract a segment to its stop. None: straight
-    (a batch: None)."""
+    as numpy). A ``start`` of a solve must not contract a segment to its stop. None: the rest
+    configuration (a batch: None)."""
     if q is None:
-        return scene.zeros(dtype) if rows is None else None
+        return scene.rest_configuration(dtype) if rows is None else None
     traced = isinstance(q, jax.core.Tracer)
     if not traced:
         try:

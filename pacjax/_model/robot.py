@@ -118,6 +118,9 @@ class ExponentialStiffening(StiffeningLaw):
 class Segment(eqx.Module):
     """One segment of the robot. SI units.
 
+    The stiffness fields are what a user who measured them enters;
+    :meth:`Segment.from_material` derives them from a material and a circular section.
+
     Args:
         length: rest length ``L`` (m).
         bending_stiffness: ``EI`` (N m^2) at the segment's base; the elastic energy uses
@@ -127,13 +130,23 @@ class Segment(eqx.Module):
             round section of an incompressible elastomer). PAC's ``k_phi`` is ``GJ / L``.
         linear_density: mass per unit rest length (kg/m) at the base.
         radius: outer radius (m) at the base (for plots, and the taper).
-        radius_tip: radius (m) at the tip for a tapered segment; then ``EI(s)`` scales with
-            ``r(s)^4`` and the density with ``r(s)^2``, ``r`` linear in ``s``. None: uniform.
+        radius_tip: outer radius (m) at the tip for a tapered segment. Along a taper ``EI(s)``
+            and ``GJ(s)`` scale with the section's second moment ``r_o(s)^4 - r_i(s)^4`` and the
+            density with its area ``r_o(s)^2 - r_i(s)^2``, both radii linear in ``s``. None:
+            the outer radius is uniform.
+        inner_radius: inner radius (m) of a hollow section at the base (default 0: solid).
+        inner_radius_tip: inner radius (m) at the tip (None: that of the base).
         stiffening: a :class:`StiffeningLaw` for ``EI`` against contraction; None: constant.
         contraction_limit: the largest contraction ``-dL`` (m) the segment can reach, ``0 <
             contraction_limit < length``: a modelled end stop (the coils or rings touching),
             see :func:`pacjax._model.energy.contraction_stop_energy`. None: 90 % of the length
             (a segment never reaches zero length, where a tendon's length has no derivative).
+        rest_curvature: the strain coordinates of the unloaded segment, in its strain model's
+            own form and order without ``dL`` (PCC ``[c0, phi]``, PAC ``[c0, c1, phi]``,
+            ``PolynomialCurvature`` its coefficients), curvatures in rad per unit ``s`` (``L``
+            times 1/m). The elastic energy is measured from this shape. None: straight.
+        extensible: False removes the elongation ``dL`` from the coordinates (the segment
+            keeps its length; ``axial_stiffness`` is then unused).
     """
 
     length: Float[Array, ""] = eqx.field(converter=float_field("Segment.length"))
@@ -153,6 +166,12 @@ class Segment(eqx.Module):
     contraction_limit: Float[Array, ""] = eqx.field(
         converter=float_field("Segment.contraction_limit"), default=None
     )
+    inner_radius: Float[Array, ""] = eqx.field(
+        converter=float_field("Segment.inner_radius"), default=0.0
+    )
+    inner_radius_tip: Float[Array, ""] | None = None
+    rest_curvature: Float[Array, " c"] | None = None
+    extensible: bool = eqx.field(static=True, default=True)
 
     def __init__(
         self,
@@ -165,6 +184,10 @@ class Segment(eqx.Module):
         radius_tip=None,
         stiffening=None,
         contraction_limit=None,
+        inner_radius=0.0,
+        inner_radius_tip=None,
+        rest_curvature=None,
+        extensible=True,
     ):
         self.length = length
         self.bending_stiffness = bending_stiffness
@@ -183,6 +206,90 @@ class Segment(eqx.Module):
         if contraction_limit is None:
             contraction_limit = DEFAULT_CONTRACTION_LIMIT * as_float(length, "Segment.length")
         self.contraction_limit = contraction_limit
+        self.inner_radius = inner_radius
+        if inner_radius_tip is not None:
+            inner_radius_tip = as_float(inner_radius_tip, "Segment.inner_radius_tip")
+        self.inner_radius_tip = inner_radius_tip
+        if rest_curvature is not None:
+            rest_curvature = as_float(rest_curvature, "Segment.rest_curvature")
+        self.rest_curvature = rest_curvature
+        if not isinstance(extensible, (bool, np.bool_)):
+            raise TypeError(f"Segment.extensible must be True or False, got {extensible!r}")
+        self.extensible = bool(extensible)
+
+    @classmethod
+    def from_material(
+        cls,
+        length,
+        *,
+        young_modulus,
+        radius,
+        density=0.0,
+        poisson=_POISSON_RATIO,
+        radius_tip=None,
+        inner_radius=0.0,
+        inner_radius_tip=None,
+        **kwargs,
+    ) -> "Segment":
+        """A segment of one material with a solid or hollow circular section, linearly tapered
+        when a tip radius is given.
+
+        ``EI = E pi (r_o^4 - r_i^4) / 4`` and ``rho A = rho pi (r_o^2 - r_i^2)`` at the base,
+        varying along the taper as :class:`Segment` describes; ``GJ = E / (2 (1 + nu)) J`` with
+        ``J = 2 I``. The single elongation coordinate stretches the segment uniformly; its
+        stiffness is the end-load stiffness ``k_a = 1 / int_0^L dx / (E A(x))`` (``E pi r_0 r_1
+        / L`` for a solid linear taper), which is also the least axial energy of any strain
+        distribution along the segment with that total elongation, so it is exact wherever the
+        axial force is uniform along the segment (no distributed axial load in it). Written
+        with ``jnp``, so every value stays differentiable in the material parameters (fitting
+        ``E`` or ``rho``).
+
+        Args:
+            length: rest length ``L`` (m).
+            young_modulus: ``E`` (Pa).
+            radius: outer radius (m) at the base.
+            density: mass density ``rho`` (kg/m^3).
+            poisson: Poisson's ratio ``nu`` (default 0.5, an incompressible elastomer).
+            radius_tip, inner_radius, inner_radius_tip: see :class:`Segment`.
+            **kwargs: the other :class:`Segment` arguments (``stiffening``,
+                ``contraction_limit``, ``rest_curvature``, ``extensible``).
+        """
+        for name, value in (("young_modulus", young_modulus), ("radius", radius)):
+            check_scalar(f"Segment.from_material {name}", as_float(value, name))
+            check_positive(f"Segment.from_material {name}", as_float(value, name))
+        check_positive("Segment.from_material density", as_float(density, "density"), True)
+        nu = concrete(as_float(poisson, "poisson"))
+        if nu is not None and not -1.0 < float(nu) <= 0.5:
+            raise ValueError(f"Segment.from_material poisson must lie in (-1, 0.5], got {nu}")
+        e = as_float(young_modulus, "young_modulus")
+        r0 = as_float(radius, "radius")
+        r1 = r0 if radius_tip is None else as_float(radius_tip, "radius_tip")
+        i0 = as_float(inner_radius, "inner_radius")
+        i1 = i0 if inner_radius_tip is None else as_float(inner_radius_tip, "inner_radius_tip")
+        _check_section("Segment.from_material", r0, r1, i0, i1)
+        second_moment = 0.25 * jnp.pi * (r0**4 - i0**4)
+        bending = e * second_moment
+        # A(s) = pi (r_o + r_i)(r_o - r_i), each factor linear in s: int_0^1 ds / A in closed
+        # form (d/ds log(f / g) = (f' g - f g') / (f g), and f' g - f g' is constant).
+        f0, f1, g0, g1 = r0 + i0, r1 + i1, r0 - i0, r1 - i1
+        det = (f1 - f0) * g0 - f0 * (g1 - g0)
+        x = det / (f0 * g1)
+        small = jnp.abs(x) < 1e-6
+        x_safe = jnp.where(small, 1.0, x)
+        log_ratio = jnp.where(small, 1.0 - x / 2.0 + x * x / 3.0, jnp.log1p(x_safe) / x_safe)
+        inverse_area = log_ratio / (jnp.pi * f0 * g1)
+        return cls(
+            length=length,
+            bending_stiffness=bending,
+            axial_stiffness=e / (as_float(length, "Segment.length") * inverse_area),
+            torsion_stiffness=bending / (1.0 + as_float(poisson, "poisson")),
+            linear_density=as_float(density, "density") * jnp.pi * (r0**2 - i0**2),
+            radius=r0,
+            radius_tip=radius_tip,
+            inner_radius=inner_radius,
+            inner_radius_tip=inner_radius_tip,
+            **kwargs,
+        )
 
     def __check_init__(self):
         for field in (
@@ -193,19 +300,40 @@ class Segment(eqx.Module):
             "linear_density",
             "radius",
             "contraction_limit",
+            "inner_radius",
         ):
             check_scalar(f"Segment.{field}", getattr(self, field))
-        if self.radius_tip is not None:
-            check_scalar("Segment.radius_tip", self.radius_tip)
+        for field in ("radius_tip", "inner_radius_tip"):
+            if getattr(self, field) is not None:
+                check_scalar(f"Segment.{field}", getattr(self, field))
         check_positive("Segment.length", self.length)
         check_positive("Segment.bending_stiffness", self.bending_stiffness)
         check_positive("Segment.axial_stiffness", self.axial_stiffness)
         check_positive("Segment.torsion_stiffness", self.torsion_stiffness)
         check_positive("Segment.linear_density", self.linear_density, allow_zero=True)
         check_positive("Segment.radius", self.radius, allow_zero=True)
+        check_positive("Segment.inner_radius", self.inner_radius, allow_zero=True)
         if self.radius_tip is not None:
             check_positive("Segment.radius_tip", self.radius_tip)
             check_positive("Segment.radius (needed by radius_tip)", self.radius)
+        if self.inner_radius_tip is not None:
+            check_positive("Segment.inner_radius_tip", self.inner_radius_tip, allow_zero=True)
+        inner = concrete(self.inner_radius)
+        if self.tapered or inner is None or inner > 0:
+            _check_section(
+                "Segment",
+                self.radius,
+                self.radius_at(np.ones(())),
+                self.inner_radius,
+                self.inner_radius_at(np.ones(())),
+            )
+        if self.rest_curvature is not None:
+            if self.rest_curvature.ndim != 1:
+                raise ValueError(
+                    "Segment.rest_curvature must be a 1-d array (the model's strain "
+                    f"coordinates), got shape {self.rest_curvature.shape}"
+                )
+            check_finite("Segment.rest_curvature", self.rest_curvature)
         check_positive("Segment.contraction_limit", self.contraction_limit)
         limit, length = concrete(self.contraction_limit), concrete(self.length)
         if limit is not None and length is not None and limit >= length:
@@ -216,17 +344,51 @@ class Segment(eqx.Module):
         if self.stiffening is not None and not isinstance(self.stiffening, StiffeningLaw):
             raise TypeError(f"Segment.stiffening must be a StiffeningLaw, got {self.stiffening!r}")
 
+    @property
+    def tapered(self) -> bool:
+        """Whether the section varies along the segment."""
+        return self.radius_tip is not None or self.inner_radius_tip is not None
+
     def radius_at(self, s: Float[Array, "*n"]) -> Float[Array, "*n"]:
         """Outer radius (m) at ``s``."""
         if self.radius_tip is None:
             return self.radius * jnp.ones_like(s)
         return self.radius + (self.radius_tip - self.radius) * s
 
-    def section_scale(self, s: Float[Array, "*n"]) -> Float[Array, "*n"] | None:
-        """``r(s) / r(0)`` for a tapered segment, None for a uniform one."""
-        if self.radius_tip is None:
-            return None
-        return self.radius_at(s) / self.radius
+    def inner_radius_at(self, s: Float[Array, "*n"]) -> Float[Array, "*n"]:
+        """Inner radius (m) at ``s`` (0 for a solid section)."""
+        if self.inner_radius_tip is None:
+            return self.inner_radius * jnp.ones_like(s)
+        return self.inner_radius + (self.inner_radius_tip - self.inner_radius) * s
+
+    def _section_ratio(self, s, power: int):
+        outer, inner = self.radius_at(s), self.inner_radius_at(s)
+        base = self.radius**power - self.inner_radius**power
+        return (outer**power - inner**power) / base
+
+    def bending_profile(self, s: Float[Array, "*n"]) -> Float[Array, "*n"] | None:
+        """``EI(s) / EI(0)`` (and ``GJ``'s) for a tapered segment, None for a uniform one."""
+        return self._section_ratio(s, 4) if self.tapered else None
+
+    def area_profile(self, s: Float[Array, "*n"]) -> Float[Array, "*n"] | None:
+        """``rho A(s) / rho A(0)`` for a tapered segment, None for a uniform one."""
+        return self._section_ratio(s, 2) if self.tapered else None
+
+
+def _check_section(owner: str, r0, r1, i0, i1) -> None:
+    """Raise a ValueError naming ``owner`` unless the inner radius stays below the outer one at
+    both ends (values known now; traced ones are not checked)."""
+    known = [concrete(x) for x in (r0, r1, i0, i1)]
+    if any(x is None for x in known):
+        return
+    r0, r1, i0, i1 = (float(x) for x in known)
+    if r0 <= 0 or r1 <= 0:
+        raise ValueError(f"{owner}: a hollow or tapered section needs radius > 0 at both ends")
+    if i0 < 0 or i1 < 0 or i0 >= r0 or i1 >= r1:
+        raise ValueError(
+            f"{owner}: inner_radius must lie in [0, radius) at both ends, got inner "
+            f"{i0:g} -> {i1:g} m inside outer {r0:g} -> {r1:g} m"
+        )
 
 
 class Robot(eqx.Module):

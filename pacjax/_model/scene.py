@@ -35,7 +35,7 @@ from .kinematics import (
 from .loads import Gravity, PointForce, PointMass, PointMoment
 from .robot import Robot, concrete, known_sites
 from .rotation import matmul3, matvec3
-from .strain import StrainModel
+from .strain import StrainModel, host_model
 from .tendons import Tendon, TendonRouting, segment_tendon_parts, tendon_energy, tendon_tensions
 
 Site = tuple  # (segment, s) or (segment, s, (ox, oy, oz))
@@ -96,6 +96,27 @@ def _count(owner: str, value) -> int:
     return int(value)
 
 
+def _models(model, n_segments: int) -> tuple[StrainModel, tuple[StrainModel, ...] | None]:
+    """``(Scene.model, Scene.segment_models)`` from one model or one per segment."""
+    if isinstance(model, StrainModel) or not isinstance(model, (list, tuple)):
+        return model, None
+    models = tuple(model)
+    if len(models) != n_segments:
+        raise ValueError(
+            f"Scene.model: one model per segment needs {n_segments}, got {len(models)}"
+        )
+    for i, m in enumerate(models):
+        if not isinstance(m, StrainModel):
+            raise TypeError(
+                f"Scene.model[{i}] must be a strain model (PCC, PAC, PolynomialCurvature), "
+                f"got {m!r}"
+            )
+    host = host_model(models)
+    if all(m == host for m in models):
+        return host, None
+    return host, models
+
+
 class SceneConstants(eqx.Module):
     """What the energy needs from the scene's parameters alone (not from ``q`` or the controls).
 
@@ -111,6 +132,7 @@ class SceneConstants(eqx.Module):
     guide_offsets: Float[Array, "g 3"] | None
     rest_lengths: Float[Array, " m"] | None
     channels: dict | None = None  # ChannelRouting.geometry
+    rest: Float[Array, "n d"] | None = None  # Scene.rest_coordinates
 
 
 class Scene(eqx.Module):
@@ -118,7 +140,11 @@ class Scene(eqx.Module):
 
     Args:
         robot: the :class:`Robot`.
-        model: the strain model (:class:`PCC`, :class:`PAC`, :class:`PolynomialCurvature`).
+        model: the strain model (:class:`PCC`, :class:`PAC`, :class:`PolynomialCurvature`), or
+            one per segment from one family (PCC with PAC; polynomials of different orders).
+            ``Scene.model`` is then the family's highest-order member, in whose coordinates
+            the kinematics runs; a lower-order segment has fewer coordinates, as does an
+            inextensible one (``Segment(extensible=False)``).
         tendons: :class:`Tendon` s; the controls vector has one entry per tendon, in order.
         loads: :class:`Gravity` (at most one), :class:`PointMass`, :class:`PointForce`,
             :class:`PointMoment`.
@@ -131,6 +157,7 @@ class Scene(eqx.Module):
 
     robot: Robot
     model: StrainModel
+    segment_models: tuple[StrainModel, ...] | None = eqx.field(static=True, default=None)
     tendons: tuple[Tendon, ...] = ()
     loads: tuple = ()
     markers: tuple = eqx.field(static=True, default=())
@@ -150,7 +177,7 @@ class Scene(eqx.Module):
         if not isinstance(robot, Robot):
             raise TypeError(f"Scene.robot must be a Robot, got {type(robot).__name__}")
         self.robot = robot
-        self.model = model
+        self.model, self.segment_models = _models(model, robot.n_segments)
         self.tendons = _sequence("Scene.tendons", tendons, "Tendons")
         self.loads = _sequence("Scene.loads", loads, "loads")
         self.markers = normalise_sites(markers, robot.n_segments, "Scene.markers")
@@ -201,7 +228,7 @@ class Scene(eqx.Module):
             raise ValueError("Scene.loads has a PointMass but no Gravity to pull on it")
         # Gauss-Legendre with n points is exact to degree 2n - 1: the elastic energy (degree
         # 2 k in s, + 4 for a taper's r^4) must be integrated exactly, or its Hessian loses rank.
-        tapered = any(seg.radius_tip is not None for seg in self.robot.segments)
+        tapered = any(seg.tapered for seg in self.robot.segments)
         needed = self.model.strain_degree() + 1 + (2 if tapered else 0)
         if self.quadrature_points < needed:
             raise ValueError(
@@ -211,6 +238,14 @@ class Scene(eqx.Module):
             )
         if self.rotation_substeps is not None and self.rotation_substeps < 1:
             raise ValueError(f"Scene.rotation_substeps must be >= 1, got {self.rotation_substeps}")
+        for i, (seg, model) in enumerate(zip(self.robot.segments, self.models, strict=True)):
+            want = model.dofs_per_segment() - 1
+            if seg.rest_curvature is not None and seg.rest_curvature.shape != (want,):
+                names = ", ".join(model.coordinate_names()[:-1])
+                raise ValueError(
+                    f"Scene.robot.segments[{i}].rest_curvature must hold {want} numbers for "
+                    f"{type(model).__name__} ({names}), got shape {seg.rest_curvature.shape}"
+                )
 
     # ----------------------------------------------------------------------------- structure
     def loads_of(self, kind, follower=None) -> list:
@@ -230,12 +265,37 @@ class Scene(eqx.Module):
         return self.robot.n_segments
 
     @property
+    def models(self) -> tuple[StrainModel, ...]:
+        """The strain model of every segment."""
+        return self.segment_models or (self.model,) * self.n_segments
+
+    @property
     def dofs_per_segment(self) -> int:
+        """Coordinates per segment of :attr:`model` (the kinematics' layout, pinned ones
+        included: see :meth:`free_coordinates`)."""
         return self.model.dofs_per_segment()
+
+    def free_coordinates(self) -> np.ndarray | None:
+        """Positions of the coordinates among the flat ``(segments, dofs_per_segment)``
+        layout, or None when every one is a coordinate.
+
+        A lower-order segment's missing coefficients and an inextensible segment's ``dL`` are
+        pinned at zero: not coordinates at all (not solved for, not in ``q``)."""
+        d = self.dofs_per_segment
+        index = []
+        for i, (seg, model) in enumerate(zip(self.robot.segments, self.models, strict=True)):
+            own = list(model.embedding(self.model))
+            if not seg.extensible:
+                own = own[:-1]
+            index += [i * d + k for k in own]
+        if len(index) == self.n_segments * d:
+            return None
+        return np.asarray(index, np.int64)
 
     @property
     def n_dofs(self) -> int:
-        return self.n_segments * self.dofs_per_segment
+        free = self.free_coordinates()
+        return self.n_segments * self.dofs_per_segment if free is None else len(free)
 
     @property
     def n_tendons(self) -> int:
@@ -252,19 +312,53 @@ class Scene(eqx.Module):
         return KinematicsConfig(self.quadrature_points, substeps)
 
     def coordinates(self, q: Float[Array, " n_dofs"]) -> Float[Array, "n d"]:
-        """Flat coordinates as a (segments, coordinates per segment) matrix."""
-        return q.reshape(self.n_segments, self.dofs_per_segment)
+        """Flat coordinates as a (segments, :attr:`dofs_per_segment`) matrix, pinned ones 0."""
+        free = self.free_coordinates()
+        shape = (self.n_segments, self.dofs_per_segment)
+        if free is None:
+            return q.reshape(shape)
+        full = jnp.zeros(q.shape[:-1] + (shape[0] * shape[1],), q.dtype)
+        return full.at[..., free].set(q).reshape(q.shape[:-1] + shape)
+
+    def free_part(self, coords: Float[Array, "*b n d"]) -> Float[Array, "*b n_dofs"]:
+        """The coordinates of a (segments, :attr:`dofs_per_segment`) matrix: the inverse of
+        :meth:`coordinates` on its image."""
+        flat = coords.reshape(coords.shape[:-2] + (-1,))
+        free = self.free_coordinates()
+        return flat if free is None else flat[..., free]
 
     def coordinate_names(self) -> tuple[str, ...]:
         names = self.model.coordinate_names()
-        return tuple(f"{name}[{i}]" for i in range(self.n_segments) for name in names)
+        full = [f"{name}[{i}]" for i in range(self.n_segments) for name in names]
+        free = self.free_coordinates()
+        return tuple(full) if free is None else tuple(full[k] for k in free)
 
     def coordinate_scale(self, dtype=float) -> Float[Array, " n_dofs"]:
         """A natural size per coordinate: 1 for strains and angles, ``L`` (m) for ``dL``."""
         d = self.dofs_per_segment
         lengths = self.robot.stacked("length").astype(dtype)
         scale = jnp.ones((self.n_segments, d), dtype).at[:, d - 1].set(lengths)
-        return scale.reshape(-1)
+        return self.free_part(scale)
+
+    def rest_coordinates(self, dtype=float) -> Float[Array, "n d"] | None:
+        """Every segment's :attr:`Segment.rest_curvature` in :attr:`model`'s layout (``dL``
+        0), or None when every segment is straight at rest."""
+        segments = self.robot.segments
+        if all(seg.rest_curvature is None for seg in segments):
+            return None
+        rows = []
+        for seg, model in zip(segments, self.models, strict=True):
+            row = jnp.zeros(self.dofs_per_segment, dtype)
+            if seg.rest_curvature is not None:
+                index = np.asarray(model.embedding(self.model)[:-1])
+                row = row.at[index].set(seg.rest_curvature.astype(dtype))
+            rows.append(row)
+        return jnp.stack(rows)
+
+    def rest_configuration(self, dtype=float) -> Float[Array, " n_dofs"]:
+        """The unloaded configuration: every segment at its rest curvature, ``dL = 0``."""
+        rest = self.rest_coordinates(dtype)
+        return self.zeros(dtype) if rest is None else self.free_part(rest)
 
     def elastic_stiffness_diagonal(self, dtype=float) -> Float[Array, " n_dofs"]:
         """Stiffness scale per coordinate: the diagonal of the elastic Hessian at rest (> 0).
@@ -272,9 +366,13 @@ class Scene(eqx.Module):
         Used to scale the residual and as the damping of the flow. A coordinate that is not a
         strain (PAC's bending-plane angle) takes the scale the model gives it.
         """
-        q0 = jnp.zeros(self.n_dofs, dtype)
-        diag = jnp.diag(jax.hessian(self.elastic_energy)(q0))
-        return self.model.stiffness_scale(self.coordinates(diag)).reshape(-1)
+        x0 = jnp.zeros(self.n_segments * self.dofs_per_segment, dtype)
+
+        def energy(x):
+            return self.coords_elastic_energy(x.reshape(self.n_segments, -1))
+
+        diag = jnp.diag(jax.hessian(energy)(x0)).reshape(self.n_segments, -1)
+        return self.free_part(self.model.stiffness_scale(diag))
 
     # ----------------------------------------------------------------------------- kinematics
     def frames(self, q, segment, s):
@@ -325,7 +423,10 @@ class Scene(eqx.Module):
         return lengths
 
     def rest_tendon_lengths(self, dtype=float) -> Float[Array, " m"]:
-        """Length (m) of every tendon on the straight robot at rest."""
+        """Length (m) of every tendon on the robot at rest (straight unless a segment has a
+        rest curvature)."""
+        if self.rest_coordinates(dtype) is not None:
+            return self.tendon_lengths(self.rest_configuration(dtype))
         segment_lengths = self.robot.stacked("length").astype(dtype)
         lengths = self._channel_lengths(jnp.zeros((self.n_segments, self.dofs_per_segment), dtype))
         routing = TendonRouting(self.tendons)
@@ -372,14 +473,33 @@ class Scene(eqx.Module):
             channels = plan.channels.geometry(self.tendons, dtype)
         if plan is not None and plan.has_tendons:
             rest = self.rest_tendon_lengths(dtype)
-        return SceneConstants(bending, torsion, node_mass, body_mass, offsets, rest, channels)
+        return SceneConstants(
+            bending,
+            torsion,
+            node_mass,
+            body_mass,
+            offsets,
+            rest,
+            channels,
+            self.rest_coordinates(dtype),
+        )
 
     def elastic_energy(
         self, q: Float[Array, " n_dofs"], consts: SceneConstants | None = None
     ) -> Float[Array, ""]:
-        stiffness = None if consts is None else (consts.bending, consts.torsion)
+        """Elastic energy (J) at ``q``, measured from the rest curvature."""
+        return self.coords_elastic_energy(self.coordinates(q), consts)
+
+    def coords_elastic_energy(
+        self, coords: Float[Array, "n d"], consts: SceneConstants | None = None
+    ) -> Float[Array, ""]:
+        """:meth:`elastic_energy` at per-segment coordinates (:meth:`coordinates`' layout)."""
+        if consts is None:
+            stiffness, rest = None, self.rest_coordinates(coords.dtype)
+        else:
+            stiffness, rest = (consts.bending, consts.torsion), consts.rest
         return elastic_energy(
-            self.model, self.robot, self.coordinates(q), self.quadrature_points, stiffness
+            self.model, self.robot, coords, self.quadrature_points, stiffness, rest
         )
 
     def potential_energy(
@@ -549,7 +669,8 @@ class Scene(eqx.Module):
 
     # ----------------------------------------------------------------------------- conversion
     def zeros(self, dtype=float) -> Float[Array, " n_dofs"]:
-        """The straight rest configuration."""
+        """The straight configuration (the rest one unless a segment has a rest curvature:
+        :meth:`rest_configuration`)."""
         return jnp.zeros(self.n_dofs, dtype)
 
     def default_controls(self, dtype=float) -> Float[Array, " m"]:

@@ -109,6 +109,14 @@ class StrainModel(eqx.Module):
         load is close to quadratic over a step."""
         return True
 
+    def embedding(self, host: "StrainModel") -> tuple[int, ...] | None:
+        """Where each of this model's coordinates sits among ``host``'s, when ``host``'s
+        kinematics with the other coordinates at zero is exactly this model's (PCC is PAC with
+        ``c1 = 0``; a polynomial is one of a higher order with zero top coefficients); None
+        when it is not. A scene mixes models through their common host
+        (:func:`host_model`)."""
+        return tuple(range(self.dofs_per_segment())) if host == self else None
+
     def free_plane_angle(self) -> int | None:
         """Index of a bending-plane angle that is undefined on a straight segment (the shape
         does not depend on it there), or None. The solver turns it to the force before it
@@ -163,6 +171,18 @@ class PlanarCurvature(StrainModel):
         # curvature, and a Newton step swings the plane far past the solution (more steps in
         # all than the continuation from the start: benchmarks/RESULTS.md).
         return False
+
+    def embedding(self, host):
+        if not (
+            isinstance(host, PlanarCurvature)
+            and host.frame == self.frame
+            and host.phi_stiffness == self.phi_stiffness
+            and host.strain_degree() >= self.strain_degree()
+        ):
+            return None
+        m, d = self.dofs_per_segment() - 2, host.dofs_per_segment()
+        # Curvature coefficients (monomials in s, nested), then phi and dL.
+        return (*range(m), d - 2, d - 1)
 
     def free_plane_angle(self) -> int | None:
         # The curvature coordinates come first, then phi, then dL. In the paper's frame phi
@@ -386,6 +406,20 @@ class PolynomialCurvature(StrainModel):
     def strain_degree(self):
         return self.order
 
+    def embedding(self, host):
+        if not (
+            isinstance(host, PolynomialCurvature)
+            and host.twist == self.twist
+            and host.order >= self.order
+        ):
+            return None
+        blocks = 3 if self.twist else 2
+        n, big = self.order + 1, host.order + 1
+        return (
+            *(b * big + j for b in range(blocks) for j in range(n)),
+            host.dofs_per_segment() - 1,
+        )
+
     def exact_rotation_substeps(self):
         # The bending plane may turn, so the Magnus series does not truncate: sub-step. Two
         # Gauss points per step integrate a cubic exactly; past that, halve the steps.
@@ -405,3 +439,20 @@ class PolynomialCurvature(StrainModel):
             else jnp.zeros_like(kx)
         )
         return jnp.stack([-ky, kx, tw])
+
+
+def host_model(models) -> StrainModel:
+    """The one model whose kinematics holds every model of ``models`` (see
+    :meth:`StrainModel.embedding`): the highest order of their family. Raises a ValueError for
+    models of different families (polar PCC/PAC with Cartesian polynomials, different frames or
+    twist)."""
+    models = tuple(models)
+    for candidate in models:
+        if all(m.embedding(candidate) is not None for m in models):
+            return candidate
+    raise ValueError(
+        "Scene.model: segments may mix models of one family only, PCC with PAC (same frame "
+        "and phi_stiffness) or PolynomialCurvature of different orders (same twist), got "
+        f"{sorted({type(m).__name__ for m in models})}; for a Cartesian constant-curvature "
+        "piece use PolynomialCurvature(order=0)"
+    )

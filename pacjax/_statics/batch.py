@@ -109,7 +109,7 @@ def iter_batch(
     lanes = pool_lanes(chunk, sharding, warm_start)
     slots = pool_slots(-(-chunk // lanes), n_devices)
 
-    starts = _Starts(scene.n_dofs, q0, warm_start, chunk)
+    starts = _Starts(np.asarray(scene.rest_configuration(dtype)), q0, warm_start, chunk)
     pool = pool_solve(
         scene, controls_batch, starts, params, update, opts, slots, chunk, dtype, sharding, lanes
     )
@@ -176,21 +176,21 @@ def _chunks_in_order(pool, starts, controls_batch, chunk: int) -> Iterator["_Chu
 
 
 class _Starts:
-    """Starting configurations: given, straight, or the equilibrium of the nearest command
-    solved so far (a bounded pool of converged rows)."""
+    """Starting configurations: given, the rest configuration, or the equilibrium of the
+    nearest command solved so far (a bounded pool of converged rows)."""
 
-    def __init__(self, n_dofs, q0, warm_start, pool_size):
-        self.n_dofs, self.q0, self.warm = n_dofs, q0, warm_start
+    def __init__(self, rest, q0, warm_start, pool_size):
+        self.rest, self.q0, self.warm = rest, q0, warm_start
         self.limit = 4 * pool_size
         self.done_u = np.zeros((0, 0))
-        self.done_q = np.zeros((0, n_dofs))
+        self.done_q = np.zeros((0, len(rest)))
 
     def __call__(self, rows, controls):
         if self.q0 is not None:
             return self.q0[rows]
         if self.warm and len(self.done_u):
             return self.done_q[_nearest_rows(self.done_u, controls)]
-        return np.zeros((len(rows), self.n_dofs))
+        return np.broadcast_to(self.rest, (len(rows), len(self.rest))).copy()
 
     def record(self, controls, eq_rows):
         if not self.warm:
@@ -279,7 +279,8 @@ def solve_batch(
     Args:
         scene: the :class:`Scene`.
         controls_batch: (batch, n_tendons) controls.
-        q0: starting configuration(s), (n_dofs,) or (batch, n_dofs); default straight.
+        q0: starting configuration(s), (n_dofs,) or (batch, n_dofs); default the rest
+            configuration (straight unless a segment has a rest curvature).
         params: optional pytree of per-row values (leading axis ``batch``), e.g. payload masses,
             applied to the scene by ``update(scene, row) -> scene`` (use ``eqx.tree_at``).
         chunk_size: rows per output chunk, and slots of the solver pool (rows solved at once;

@@ -88,6 +88,9 @@ def order_step(scene: Scene) -> OrderStep | None:
     model = scene.model
     if not isinstance(model, PolynomialCurvature) or model.order < 2:
         return None
+    if scene.free_coordinates() is not None or scene.rest_coordinates() is not None:
+        # Pinned coordinates or a rest curvature are written in this order's layout.
+        return None
     low = PolynomialCurvature(model.order - 1, twist=model.twist)
     return OrderStep(eqx.tree_at(lambda sc: sc.model, scene, low), low, model)
 

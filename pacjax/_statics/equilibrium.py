@@ -195,7 +195,8 @@ def solve_equilibrium(
         scene: the :class:`Scene`.
         controls: (n_tendons,) pull-in (m) for length-mode tendons, tension (N) for tension-mode
             ones; default zeros.
-        q0: starting configuration (default straight). A straight PCC/PAC segment's
+        q0: starting configuration (default :meth:`Scene.rest_configuration`: straight
+            unless a segment has a rest curvature). A straight PCC/PAC segment's
             bending-plane angle is first turned to the force on it (:meth:`ScaledProblem.aligned`).
         fallback: when continuation fails, retry with the diffrax flow (outside jit, compiled
             only when needed). Whatever ``fallback`` says, a failed solve is first retried by

@@ -126,9 +126,8 @@ class ScaledProblem(eqx.Module):
         k = self.scene.model.free_plane_angle()
         if k is None:
             return y + dy
-        n, d = self.scene.n_segments, self.scene.dofs_per_segment
-        q = (self.sigma * y).reshape(n, d)
-        dq = (self.sigma * dy).reshape(n, d)
+        q = self.scene.coordinates(self.sigma * y)
+        dq = self.scene.coordinates(self.sigma * dy)
         beta = self.scene.model.plane_angle_basis(jnp.ones((), y.dtype))
         c, dc, dphi = q[:, :k], dq[:, :k], dq[:, k]
         theta = jnp.matmul(c, beta, precision=MATMUL_PRECISION)
@@ -141,7 +140,7 @@ class ScaledProblem(eqx.Module):
         c_new = jnp.where(flat[:, None], c + dc, c_new)
         turn = jnp.where(flat, dphi, turn)
         q_new = (q + dq).at[:, :k].set(c_new).at[:, k].set(q[:, k] + turn)
-        return q_new.reshape(-1) / self.sigma
+        return self.scene.free_part(q_new) / self.sigma
 
     def aligned(self, y, tol: float, keep=None):
         """``y`` with the bending plane of each straight segment turned to the force on it.
@@ -162,15 +161,15 @@ class ScaledProblem(eqx.Module):
         k = self.scene.model.free_plane_angle()
         if k is None:
             return y
-        n, d = self.scene.n_segments, self.scene.dofs_per_segment
-        coords = y.reshape(n, d)
+        n = self.scene.n_segments
+        coords = self.scene.coordinates(y)
         straight = jnp.all(coords[:, :k] == 0, axis=1)
         if keep is not None:
             straight = straight & ~keep
 
         def force_on_c0(phi):
             trial = coords.at[:, k].set(jnp.where(straight, phi, coords[:, k]))
-            return self.residual(trial.reshape(-1)).reshape(n, d)[:, 0]
+            return self.scene.coordinates(self.residual(self.scene.free_part(trial)))[:, 0]
 
         # One batched residual (one copy of its graph to compile).
         a, b = jax.vmap(force_on_c0)(jnp.asarray([0.0, 0.5 * np.pi], y.dtype))
@@ -185,7 +184,7 @@ class ScaledProblem(eqx.Module):
         inherit = straight & ~turn
         for i in range(1, n):
             phi = phi.at[i].set(jnp.where(inherit[i], phi[i - 1], phi[i]))
-        return coords.at[:, k].set(phi).reshape(-1)
+        return self.scene.free_part(coords.at[:, k].set(phi))
 
     def weights(self):
         """``sqrt(d) sigma``: maps scaled coordinates to ``D^1/2``-weighted ones."""

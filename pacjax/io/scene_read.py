@@ -201,11 +201,13 @@ def scene_from_toml(text: str, source: str = "<string>", default_name: str = "sc
     preset_name, preset_args = _read_preset(top)
     loads = [_read_load(t) for t in top.tables("loads")]
     if preset_name is None:
-        segments = _read_segments(top)
+        segments, models = _read_segments(top, model)
         robot = _read_robot(top.table("robot"), segments, source)
         tendons = [_read_tendon(t, len(segments)) for t in top.tables("tendons")]
         _check_load_segments(top, loads, len(segments))
-        scene = top.build(Scene, robot, model, tendons=tendons, loads=loads, **numerics)
+        if all(m == model for m in models):
+            models = model
+        scene = top.build(Scene, robot, models, tendons=tendons, loads=loads, **numerics)
     else:
         for key in ("segments", "robot", "tendons"):
             if top.has(key):
@@ -248,20 +250,23 @@ def _rebuild(top: _Table, scene: Scene, **changes) -> Scene:
         rotation_substeps=scene.rotation_substeps,
     )
     fields.update(changes)
-    return top.build(Scene, scene.robot, scene.model, **fields)
+    return top.build(Scene, scene.robot, scene.models, **fields)
 
 
-def _read_model(t: _Table | None, source: str):
+def _read_model(t: _Table | None, source: str, family=None):
+    """The model of a ``[model]`` table (or a segment's ``model``, whose unset options are
+    those of ``family``, the ``[model]`` one) and its numerics."""
     if t is None:
         return PAC(), {}
     kind = t.string("type", required=True, choices=_MODELS)
     if kind == "PolynomialCurvature":
         order = t.integer("order", 3, minimum=0)
-        twist = t.boolean("twist", False)
+        twist = t.boolean("twist", getattr(family, "twist", False))
         model = t.build(PolynomialCurvature, order=order, twist=twist)
     else:
-        frame = t.string("frame", "torsion_free", choices=("torsion_free", "paper"))
-        phi_stiffness = t.number("phi_stiffness")
+        frame_default = getattr(family, "frame", "torsion_free")
+        frame = t.string("frame", frame_default, choices=("torsion_free", "paper"))
+        phi_stiffness = t.number("phi_stiffness", getattr(family, "phi_stiffness", None))
         model = t.build(PAC if kind == "PAC" else PCC, frame=frame, phi_stiffness=phi_stiffness)
     numerics = {}
     if t.has("quadrature_points"):
@@ -303,27 +308,83 @@ def _read_preset(top: _Table):
     return name, args
 
 
-def _read_segments(top: _Table) -> list[Segment]:
+def _read_segments(top: _Table, default_model) -> tuple[list[Segment], list]:
+    """The segments and each one's strain model (its ``model`` key, else ``default_model``)."""
     tables = top.tables("segments")
     if not tables:
         top.fail("missing [[segments]] (or a preset): a robot needs at least one segment")
-    segments = []
+    segments, models = [], []
     for t in tables:
         repeat = t.integer("repeat", 1, minimum=1)
-        kwargs = dict(
-            length=t.number("length", required=True),
-            bending_stiffness=t.number("bending_stiffness", required=True),
-            axial_stiffness=t.number("axial_stiffness", required=True),
-            torsion_stiffness=t.number("torsion_stiffness"),
-            linear_density=t.number("linear_density", 0.0),
-            radius=t.number("radius", 0.0),
+        model = default_model
+        if t.has("model"):
+            value = t.raw("model")
+            if not isinstance(value, (str, dict)):
+                t.fail(f"expected a model name or table, got {_describe(value)}", "model")
+            model, numerics = _read_model(
+                _Table(
+                    {"type": value} if isinstance(value, str) else value,
+                    f"{t.where}.model",
+                    t.source,
+                ),
+                t.source,
+                default_model,
+            )
+            if numerics:
+                t.fail("quadrature_points and rotation_substeps belong in [model]", "model")
+        common = dict(
             radius_tip=t.number("radius_tip"),
+            inner_radius=t.number("inner_radius", 0.0),
+            inner_radius_tip=t.number("inner_radius_tip"),
             stiffening=_read_stiffening(t),
             contraction_limit=t.number("contraction_limit"),
+            rest_curvature=t.numbers("rest_curvature"),
+            extensible=t.boolean("extensible", True),
         )
+        if t.has("young_modulus"):
+            for key in (
+                "bending_stiffness",
+                "axial_stiffness",
+                "torsion_stiffness",
+                "linear_density",
+            ):
+                if t.has(key):
+                    t.fail(
+                        f"give either young_modulus (with radius, density, poisson) or "
+                        f"{key}, not both",
+                        key,
+                    )
+            segment = t.build(
+                Segment.from_material,
+                t.number("length", required=True),
+                young_modulus=t.number("young_modulus"),
+                radius=t.number("radius", required=True),
+                density=t.number("density", 0.0),
+                poisson=t.number("poisson", 0.5),
+                **common,
+            )
+        else:
+            for key in ("density", "poisson"):
+                if t.has(key):
+                    t.fail(
+                        f"{key} is a material value: it needs young_modulus (else give "
+                        "linear_density and torsion_stiffness)",
+                        key,
+                    )
+            segment = t.build(
+                Segment,
+                length=t.number("length", required=True),
+                bending_stiffness=t.number("bending_stiffness", required=True),
+                axial_stiffness=t.number("axial_stiffness", required=True),
+                torsion_stiffness=t.number("torsion_stiffness"),
+                linear_density=t.number("linear_density", 0.0),
+                radius=t.number("radius", 0.0),
+                **common,
+            )
         t.finish()
-        segments += [t.build(Segment, **kwargs)] * repeat
-    return segments
+        segments += [segment] * repeat
+        models += [model] * repeat
+    return segments, models
 
 
 def _read_stiffening(t: _Table):

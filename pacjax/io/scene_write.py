@@ -25,7 +25,15 @@ def _vector(x) -> list[float]:
 
 
 def _model_table(scene: Scene) -> dict:
-    model = scene.model
+    out = _model_entry(scene.model)
+    if scene.quadrature_points != 8:
+        out["quadrature_points"] = scene.quadrature_points
+    if scene.rotation_substeps is not None:
+        out["rotation_substeps"] = scene.rotation_substeps
+    return out
+
+
+def _model_entry(model) -> dict:
     out: dict = {"type": type(model).__name__}
     if isinstance(model, PolynomialCurvature):
         out["order"] = model.order
@@ -37,10 +45,6 @@ def _model_table(scene: Scene) -> dict:
             out["phi_stiffness"] = float(model.phi_stiffness)
     else:
         raise ValueError(f"cannot write strain model {type(model).__name__} to a scene file")
-    if scene.quadrature_points != 8:
-        out["quadrature_points"] = scene.quadrature_points
-    if scene.rotation_substeps is not None:
-        out["rotation_substeps"] = scene.rotation_substeps
     return out
 
 
@@ -56,6 +60,14 @@ def _segment_table(seg: Segment) -> dict:
     }
     if seg.radius_tip is not None:
         out["radius_tip"] = _scalar(seg.radius_tip)
+    if _scalar(seg.inner_radius) != 0.0:
+        out["inner_radius"] = _scalar(seg.inner_radius)
+    if seg.inner_radius_tip is not None:
+        out["inner_radius_tip"] = _scalar(seg.inner_radius_tip)
+    if seg.rest_curvature is not None:
+        out["rest_curvature"] = _vector(seg.rest_curvature)
+    if not seg.extensible:
+        out["extensible"] = False
     if seg.stiffening is not None:
         if not isinstance(seg.stiffening, ExponentialStiffening):
             raise ValueError(
@@ -141,6 +153,9 @@ _UNITS = {
     "linear_density": "kg/m",
     "radius": "m",
     "radius_tip": "m",
+    "inner_radius": "m",
+    "inner_radius_tip": "m",
+    "rest_curvature": "rad per unit s",
     "contraction_limit": "m",
     "base_position": "m",
     "offset": "m",
@@ -206,8 +221,10 @@ def scene_to_toml(
             for seg, s, offset in scene.markers
         ]
     segments: list[dict] = []
-    for seg in scene.robot.segments:
+    for seg, model in zip(scene.robot.segments, scene.models, strict=True):
         table = _segment_table(seg)
+        if scene.segment_models is not None and model != scene.model:
+            table["model"] = _model_entry(model)
         if segments and {k: v for k, v in segments[-1].items() if k != "repeat"} == table:
             segments[-1]["repeat"] = segments[-1].get("repeat", 1) + 1
         else:

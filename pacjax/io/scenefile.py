@@ -36,6 +36,23 @@ before the first table, as TOML puts every later key into the table above it::
     contraction_limit = 0.070    # m, end stop of the contraction (optional: 0.9 * length)
     repeat = 2                   # this many identical segments (optional: 1)
 
+    [[segments]]                 # from the material instead of the stiffnesses
+    length = 0.2                 # m
+    young_modulus = 1.2e6        # E, Pa (then no bending/axial/torsion_stiffness or
+                                 # linear_density: they follow from the section)
+    radius = 0.01                # m, outer radius at the base (required here)
+    density = 1070.0             # kg/m^3 (optional: 0)
+    poisson = 0.5                # (optional: 0.5)
+    radius_tip = 0.006           # m, linear taper (optional)
+    inner_radius = 0.003         # m, hollow section (optional: 0); inner_radius_tip likewise
+    rest_curvature = [2.0, 0.0]  # the unloaded shape in this segment's model's coordinates
+                                 # without dL (PCC: [c0, phi]; PAC: [c0, c1, phi]; polynomial:
+                                 # its coefficients), rad per unit s (optional: straight)
+    extensible = false           # no elongation coordinate (optional: true)
+    model = "PCC"                # this segment's model, of [model]'s family (PCC with PAC,
+                                 # polynomials of any order: a table such as
+                                 # { type = "PolynomialCurvature", order = 0 }); optional
+
     [robot]
     mount = "hanging"            # "hanging" | "upright" | "horizontal", or:
     # base_rotation = [[1, 0, 0], [0, 1, 0], [0, 0, 1]]   # base frame -> world
