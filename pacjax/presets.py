@@ -167,15 +167,15 @@ def tentacle(
     in tension mode: controls (2,) are tensions in N. Markers as in the data (three on stalks
     along the body, one 8 mm beyond the tip).
 
-    Section stiffness from the material: ``EI = E pi r^4 / 4``, ``GJ = EI / (1 + nu)``,
-    ``rho A = rho pi r^2`` at each piece's base (the taper scales them with ``r^4`` and ``r^2``),
-    and the axial stiffness of a linear taper under an end load, ``E pi r0 r1 / L`` (``1 / int
-    ds / EA``: the least elastic energy of any axial strain along the piece with the same total
-    elongation, which is what the one elongation coordinate measures; a uniform stretch, as in
-    SoRoMoX's strain basis, is 27 % stiffer for the first piece).
+    Section stiffness from the material (:meth:`Segment.from_material`): the axial stiffness of
+    a linear taper under an end load, ``E pi r0 r1 / L``, is the least elastic energy of any
+    axial strain along the piece with the same total elongation, which is what the one
+    elongation coordinate measures; a uniform stretch, as in SoRoMoX's strain basis, is 27 %
+    stiffer for the first piece.
 
     Args:
-        model: strain model (default :class:`PAC`, frame ``"torsion_free"``).
+        model: strain model (default :class:`PAC`, frame ``"torsion_free"``), or one per piece
+            (the data's reference model is affine then constant curvature: ``(PAC(), PCC())``).
         routing: ``"channel"`` (as built) or ``"rings"`` (the same channels sampled by
             ``n_guides`` rings per piece: chords, for comparison).
         n_guides: rings per piece with ``routing="rings"``.
@@ -186,20 +186,17 @@ def tentacle(
     """
     if mount not in MOUNTS:
         raise ValueError(f"mount must be one of {tuple(MOUNTS)}, got {mount!r}")
-    segments = []
-    for length, r0, r1 in TENTACLE_PIECES:
-        bending = young_modulus * math.pi * r0**4 / 4.0
-        segments.append(
-            Segment(
-                length=length,
-                bending_stiffness=bending,
-                axial_stiffness=young_modulus * math.pi * r0 * r1 / length,
-                torsion_stiffness=bending / (1.0 + poisson),
-                linear_density=density * math.pi * r0**2,
-                radius=r0,
-                radius_tip=r1,
-            )
+    segments = [
+        Segment.from_material(
+            length,
+            young_modulus=young_modulus,
+            poisson=poisson,
+            density=density,
+            radius=r0,
+            radius_tip=r1,
         )
+        for length, r0, r1 in TENTACLE_PIECES
+    ]
     robot = Robot(segments, base_rotation=MOUNTS[mount])
     routed = (
         {"routing": "channel"}
