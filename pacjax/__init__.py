@@ -24,6 +24,7 @@ _PUBLIC = {
     "ExponentialStiffening": "._model.robot",
     "Robot": "._model.robot",
     "Segment": "._model.robot",
+    "SectionProfile": "._model.robot",
     "StiffeningLaw": "._model.robot",
     "Scene": "._model.scene",
     "PAC": "._model.strain",

@@ -401,3 +401,76 @@ rest_curvature = [0.3, 0.0]
         np.testing.assert_array_equal(a, b)
     with pytest.raises(ValueError, match="young_modulus"):
         scene_from_toml(text.replace("density = 1070.0", "linear_density = 0.3"))
+
+
+# ------------------------------------------------------------------------------ section profiles
+def test_a_profile_equal_to_a_taper_gives_the_same_robot():
+    r0, r1 = 0.01, 0.006
+    tapered = pj.Segment.from_material(0.2, young_modulus=E, density=RHO, radius=r0, radius_tip=r1)
+    ratio = np.polynomial.polynomial.Polynomial([1.0, (r1 - r0) / r0])
+    profile = pj.SectionProfile(bending=(ratio**4).coef, density=(ratio**2).coef)
+    profiled = pj.Segment(
+        0.2,
+        tapered.bending_stiffness,
+        tapered.axial_stiffness,
+        tapered.torsion_stiffness,
+        tapered.linear_density,
+        radius=r0,
+        profile=profile,
+    )
+    s = np.linspace(0, 1, 7)
+    np.testing.assert_allclose(profiled.bending_profile(s), tapered.bending_profile(s), rtol=1e-14)
+    ea = E * np.pi * r0**2
+    np.testing.assert_allclose(
+        pj.SectionProfile.end_load_stiffness(ea, 0.2, (ratio**2).coef),
+        tapered.axial_stiffness,
+        rtol=1e-13,
+    )
+    loads = [pj.Gravity(), pj.PointForce(np.array([0.0, 0.03, 0.0]), 0)]
+    a = pj.Scene(pj.Robot([tapered]), pj.PolynomialCurvature(2), loads=loads)
+    b = pj.Scene(pj.Robot([profiled]), pj.PolynomialCurvature(2), loads=loads)
+    q = jnp.asarray(np.random.default_rng(1).normal(size=a.n_dofs) * 0.2)
+    np.testing.assert_allclose(
+        b.potential_energy(q, b.default_controls()),
+        a.potential_energy(q, a.default_controls()),
+        rtol=1e-13,
+    )
+
+
+def test_profile_is_checked():
+    with pytest.raises(ValueError, match=r"bending\[0\] must be 1"):
+        pj.SectionProfile(bending=[2.0, 1.0])
+    with pytest.raises(ValueError, match="stay > 0"):
+        pj.SectionProfile(bending=[1.0, -1.5])
+    with pytest.raises(ValueError, match="replaces the taper"):
+        pj.Segment(
+            0.1, 1.0, 1.0, radius=0.01, radius_tip=0.005, profile=pj.SectionProfile(bending=[1.0])
+        )
+    seg = pj.Segment(0.1, 1.0, 1.0, profile=pj.SectionProfile(bending=[1.0, 0.1, 0.1, 0.1, 0.1]))
+    # Strain degree 2 and a quartic EI: the energy has degree 8, exact with 5 points.
+    pj.Scene(pj.Robot([seg]), pj.PolynomialCurvature(2), quadrature_points=5)
+    with pytest.raises(ValueError, match="quadrature_points must be >= 5"):
+        pj.Scene(pj.Robot([seg]), pj.PolynomialCurvature(2), quadrature_points=4)
+
+
+def test_gradient_through_a_solve_with_respect_to_rest_curvature():
+    seg = pj.Segment(0.15, 0.004, 500.0, linear_density=0.1, rest_curvature=[0.6, 0.2, 0.0, 0.0])
+    scene = pj.Scene(pj.Robot([seg, seg]), pj.PolynomialCurvature(1), loads=[pj.Gravity()])
+
+    def tip_x(rest):
+        segs = [eqx_replace(s, rest) for s in scene.robot.segments]
+        sc = pj.Scene(pj.Robot(segs), scene.model, loads=scene.loads)
+        return pj.markers(sc, pj.solve_equilibrium(sc, tol=1e-12).q, [(1, 1.0)])[0, 0]
+
+    rest = jnp.asarray([0.6, 0.2, 0.0, 0.0])
+    grad = jax.jit(jax.grad(tip_x))(rest)
+    tip_x = jax.jit(tip_x)
+    h = 1e-6
+    fd = [(tip_x(rest.at[k].add(h)) - tip_x(rest.at[k].add(-h))) / (2 * h) for k in range(4)]
+    np.testing.assert_allclose(grad, fd, rtol=1e-5, atol=1e-9)
+
+
+def eqx_replace(segment, rest):
+    import equinox as eqx
+
+    return eqx.tree_at(lambda s: s.rest_curvature, segment, rest)

@@ -59,6 +59,11 @@ def high_fidelity(
             "subdivisions > 1 is not possible with Bowden tendons (a Bowden tendon enters at the "
             "base of its own segment); use subdivisions=1 and a higher-order model"
         )
+    if n > 1 and any(seg.profile is not None for seg in scene.robot.segments):
+        raise ValueError(
+            "high_fidelity: subdivisions > 1 with a SectionProfile (its polynomial is in the "
+            "whole segment's s); use subdivisions=1 and a higher-order model"
+        )
     if any(seg.rest_curvature is not None for seg in scene.robot.segments):
         raise ValueError(
             "high_fidelity: a segment has a rest_curvature, which is written in the scene's "
@@ -98,6 +103,7 @@ def _segment_piece(seg: Segment, j: int, n: int, law) -> Segment:
         stiffening=law,
         contraction_limit=seg.contraction_limit / n,
         extensible=seg.extensible,
+        profile=seg.profile,
     )
 
 

@@ -115,6 +115,73 @@ class ExponentialStiffening(StiffeningLaw):
         return jnp.exp(-self.rate * elongation / length)
 
 
+class SectionProfile(eqx.Module):
+    """A section that varies along a segment in a way no taper describes: ``EI(s)`` (and
+    ``GJ(s)``) and ``rho A(s)`` as polynomials in the normalised arc length ``s``, as factors on
+    the segment's base values (``bending_stiffness``, ``torsion_stiffness``,
+    ``linear_density``), so the first coefficient is 1.
+
+    They enter the elastic energy exactly (Gauss-Legendre of enough points: the scene checks) and
+    the weight and inertia exactly up to degree 7. The elongation coordinate's stiffness stays
+    ``Segment.axial_stiffness``: :meth:`end_load_stiffness` computes it from an ``EA(s)``
+    profile.
+
+    Args:
+        bending: coefficients ``[1, b1, b2, ...]`` of ``EI(s) / EI(0)``, lowest first.
+        density: coefficients ``[1, d1, ...]`` of ``rho A(s) / rho A(0)`` (default uniform).
+    """
+
+    bending: Float[Array, " k"] = eqx.field(converter=float_field("SectionProfile.bending"))
+    density: Float[Array, " j"] = eqx.field(
+        converter=float_field("SectionProfile.density"), default=(1.0,)
+    )
+
+    def __check_init__(self):
+        for name in ("bending", "density"):
+            value = getattr(self, name)
+            if value.ndim != 1 or value.shape[0] < 1:
+                raise ValueError(f"SectionProfile.{name} must be a list of coefficients")
+            check_finite(f"SectionProfile.{name}", value)
+            known = concrete(value)
+            if known is None:
+                continue
+            if known[0] != 1.0:
+                raise ValueError(
+                    f"SectionProfile.{name}[0] must be 1 (a factor on the base value), got "
+                    f"{known[0]}"
+                )
+            if np.any(np.polynomial.polynomial.polyval(np.linspace(0, 1, 201), known) <= 0):
+                raise ValueError(f"SectionProfile.{name} must stay > 0 for s in [0, 1]")
+
+    @staticmethod
+    def _polyval(coefficients, s):
+        out = jnp.zeros_like(s) + coefficients[-1]
+        for c in coefficients[-2::-1]:
+            out = out * s + c
+        return out
+
+    def bending_at(self, s: Float[Array, "*n"]) -> Float[Array, "*n"]:
+        return self._polyval(self.bending, s)
+
+    def density_at(self, s: Float[Array, "*n"]) -> Float[Array, "*n"]:
+        return self._polyval(self.density, s)
+
+    @property
+    def degree(self) -> int:
+        """The bending polynomial's degree (the elastic energy's quadrature needs it)."""
+        return self.bending.shape[0] - 1
+
+    @staticmethod
+    def end_load_stiffness(axial_rigidity, length, coefficients) -> Float[Array, ""]:
+        """``k_a = 1 / int_0^L dx / EA(x)`` (N/m) for ``EA(s) = axial_rigidity * p(s)``, ``p``
+        the polynomial ``coefficients`` (32-point Gauss-Legendre: converged to round-off for a
+        ``p`` that stays well away from zero on ``[0, 1]``)."""
+        nodes, weights = np.polynomial.legendre.leggauss(32)
+        s = 0.5 * (nodes + 1.0)
+        p = SectionProfile._polyval(as_float(coefficients, "coefficients"), jnp.asarray(s))
+        return axial_rigidity / (length * jnp.sum(0.5 * weights / p))
+
+
 class Segment(eqx.Module):
     """One segment of the robot. SI units.
 
@@ -147,6 +214,8 @@ class Segment(eqx.Module):
             times 1/m). The elastic energy is measured from this shape. None: straight.
         extensible: False removes the elongation ``dL`` from the coordinates (the segment
             keeps its length; ``axial_stiffness`` is then unused).
+        profile: a :class:`SectionProfile` (measured ``EI(s)``, ``rho A(s)``) instead of a
+            taper. None: uniform, or the taper.
     """
 
     length: Float[Array, ""] = eqx.field(converter=float_field("Segment.length"))
@@ -172,6 +241,7 @@ class Segment(eqx.Module):
     inner_radius_tip: Float[Array, ""] | None = None
     rest_curvature: Float[Array, " c"] | None = None
     extensible: bool = eqx.field(static=True, default=True)
+    profile: SectionProfile | None = None
 
     def __init__(
         self,
@@ -188,6 +258,7 @@ class Segment(eqx.Module):
         inner_radius_tip=None,
         rest_curvature=None,
         extensible=True,
+        profile=None,
     ):
         self.length = length
         self.bending_stiffness = bending_stiffness
@@ -216,6 +287,7 @@ class Segment(eqx.Module):
         if not isinstance(extensible, (bool, np.bool_)):
             raise TypeError(f"Segment.extensible must be True or False, got {extensible!r}")
         self.extensible = bool(extensible)
+        self.profile = profile
 
     @classmethod
     def from_material(
@@ -341,6 +413,14 @@ class Segment(eqx.Module):
                 f"Segment.contraction_limit must be below Segment.length ({float(length)} m), "
                 f"got {float(limit)} m: a segment cannot contract to zero length"
             )
+        if self.profile is not None:
+            if not isinstance(self.profile, SectionProfile):
+                raise TypeError(f"Segment.profile must be a SectionProfile, got {self.profile!r}")
+            if self.tapered:
+                raise ValueError(
+                    "Segment.profile replaces the taper: give either radius_tip / "
+                    "inner_radius_tip or a profile"
+                )
         if self.stiffening is not None and not isinstance(self.stiffening, StiffeningLaw):
             raise TypeError(f"Segment.stiffening must be a StiffeningLaw, got {self.stiffening!r}")
 
@@ -367,12 +447,23 @@ class Segment(eqx.Module):
         return (outer**power - inner**power) / base
 
     def bending_profile(self, s: Float[Array, "*n"]) -> Float[Array, "*n"] | None:
-        """``EI(s) / EI(0)`` (and ``GJ``'s) for a tapered segment, None for a uniform one."""
+        """``EI(s) / EI(0)`` (and ``GJ``'s) of a tapered or profiled segment, None for a
+        uniform one."""
+        if self.profile is not None:
+            return self.profile.bending_at(s)
         return self._section_ratio(s, 4) if self.tapered else None
 
     def area_profile(self, s: Float[Array, "*n"]) -> Float[Array, "*n"] | None:
-        """``rho A(s) / rho A(0)`` for a tapered segment, None for a uniform one."""
+        """``rho A(s) / rho A(0)`` of a tapered or profiled segment, None for a uniform one."""
+        if self.profile is not None:
+            return self.profile.density_at(s)
         return self._section_ratio(s, 2) if self.tapered else None
+
+    def profile_degree(self) -> int:
+        """Polynomial degree in ``s`` of :meth:`bending_profile` (0 when uniform)."""
+        if self.profile is not None:
+            return self.profile.degree
+        return 4 if self.tapered else 0
 
 
 def _check_section(owner: str, r0, r1, i0, i1) -> None:

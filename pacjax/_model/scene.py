@@ -227,14 +227,15 @@ class Scene(eqx.Module):
         if self.loads_of(PointMass) and self.gravity is None:
             raise ValueError("Scene.loads has a PointMass but no Gravity to pull on it")
         # Gauss-Legendre with n points is exact to degree 2n - 1: the elastic energy (degree
-        # 2 k in s, + 4 for a taper's r^4) must be integrated exactly, or its Hessian loses rank.
-        tapered = any(seg.tapered for seg in self.robot.segments)
-        needed = self.model.strain_degree() + 1 + (2 if tapered else 0)
+        # 2 k in s, + 4 for a taper's r^4, + a profile's) must be integrated exactly, or its
+        # Hessian loses rank.
+        profile = max(seg.profile_degree() for seg in self.robot.segments)
+        needed = self.model.strain_degree() + 1 + (profile + 1) // 2
         if self.quadrature_points < needed:
             raise ValueError(
                 f"Scene.quadrature_points must be >= {needed} for this model"
-                f"{' with tapered segments' if tapered else ''} (the elastic energy is integrated "
-                f"exactly only then), got {self.quadrature_points}"
+                f"{' with tapered or profiled segments' if profile else ''} (the elastic energy "
+                f"is integrated exactly only then), got {self.quadrature_points}"
             )
         if self.rotation_substeps is not None and self.rotation_substeps < 1:
             raise ValueError(f"Scene.rotation_substeps must be >= 1, got {self.rotation_substeps}")

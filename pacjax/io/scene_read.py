@@ -11,7 +11,7 @@ import numpy as np
 
 from .. import presets
 from .._model.loads import Gravity, PointForce, PointMass, PointMoment
-from .._model.robot import ExponentialStiffening, Robot, Segment
+from .._model.robot import ExponentialStiffening, Robot, SectionProfile, Segment
 from .._model.scene import Scene
 from .._model.strain import PAC, PCC, PolynomialCurvature
 from .._model.tendons import Tendon
@@ -340,6 +340,7 @@ def _read_segments(top: _Table, default_model) -> tuple[list[Segment], list]:
             contraction_limit=t.number("contraction_limit"),
             rest_curvature=t.numbers("rest_curvature"),
             extensible=t.boolean("extensible", True),
+            profile=_read_profile(t),
         )
         if t.has("young_modulus"):
             for key in (
@@ -385,6 +386,22 @@ def _read_segments(top: _Table, default_model) -> tuple[list[Segment], list]:
         segments += [segment] * repeat
         models += [model] * repeat
     return segments, models
+
+
+def _read_profile(t: _Table):
+    value = t.raw("profile")
+    if value is _MISSING:
+        return None
+    if not isinstance(value, dict):
+        t.fail(
+            f"expected a table {{ bending = [...], density = [...] }}, got {_describe(value)}",
+            "profile",
+        )
+    p = _Table(value, f"{t.where}.profile", t.source)
+    bending = p.numbers("bending", required=True)
+    density = p.numbers("density", [1.0])
+    p.finish()
+    return p.build(SectionProfile, bending, density)
 
 
 def _read_stiffening(t: _Table):

@@ -68,6 +68,11 @@ def _segment_table(seg: Segment) -> dict:
         out["rest_curvature"] = _vector(seg.rest_curvature)
     if not seg.extensible:
         out["extensible"] = False
+    if seg.profile is not None:
+        out["profile"] = {
+            "bending": _vector(seg.profile.bending),
+            "density": _vector(seg.profile.density),
+        }
     if seg.stiffening is not None:
         if not isinstance(seg.stiffening, ExponentialStiffening):
             raise ValueError(

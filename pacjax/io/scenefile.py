@@ -49,6 +49,8 @@ before the first table, as TOML puts every later key into the table above it::
                                  # without dL (PCC: [c0, phi]; PAC: [c0, c1, phi]; polynomial:
                                  # its coefficients), rad per unit s (optional: straight)
     extensible = false           # no elongation coordinate (optional: true)
+    # profile = { bending = [1.0, -0.8, 0.2], density = [1.0, -0.5] }  # instead of a taper:
+                                 # EI(s)/EI(0) and rho A(s)/rho A(0) as polynomials in s
     model = "PCC"                # this segment's model, of [model]'s family (PCC with PAC,
                                  # polynomials of any order: a table such as
                                  # { type = "PolynomialCurvature", order = 0 }); optional
