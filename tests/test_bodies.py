@@ -264,8 +264,12 @@ def _two_segments(extensible=True, rest=(None, None)):
 
 @pytest.mark.parametrize(
     "models",
-    [(pj.PAC(), pj.PCC()), (pj.PolynomialCurvature(1), pj.PolynomialCurvature(0))],
-    ids=["PAC+PCC", "Poly1+Poly0"],
+    [
+        (pj.PAC(), pj.PCC()),
+        (pj.PolynomialCurvature(1), pj.PolynomialCurvature(0)),
+        (pj.PolynomialCurvature(1), pj.PCC()),
+    ],
+    ids=["PAC+PCC", "Poly1+Poly0", "Poly1+PCC"],
 )
 def test_mixed_models_equal_the_single_model_where_they_coincide(models):
     # A pure end moment bends the distal segment at constant curvature: there the lower-order
@@ -357,6 +361,12 @@ def test_inextensible_is_the_limit_of_axial_stiffness_and_has_one_coordinate_few
 def test_mixing_families_is_refused():
     with pytest.raises(ValueError, match="one family"):
         pj.Scene(_two_segments(), [pj.PAC(), pj.PolynomialCurvature(0)])
+    with pytest.raises(ValueError, match="one family"):
+        pj.Scene(_two_segments(), [pj.PolynomialCurvature(1), pj.PCC(frame="paper")])
+    # PCC among polynomials: the same kinematics in Cartesian coordinates.
+    scene = pj.Scene(_two_segments(), [pj.PolynomialCurvature(1), pj.PCC()])
+    assert scene.segment_models[1] == pj.PolynomialCurvature(0)
+    assert scene.coordinate_names()[-3:] == ("kx_0[1]", "ky_0[1]", "dL[1]")
     with pytest.raises(ValueError, match="one model per segment needs 2"):
         pj.Scene(_two_segments(), [pj.PAC()])
 

@@ -35,7 +35,7 @@ from .kinematics import (
 from .loads import Gravity, PointForce, PointMass, PointMoment
 from .robot import Robot, concrete, known_sites
 from .rotation import matmul3, matvec3
-from .strain import StrainModel, host_model
+from .strain import StrainModel, common_family
 from .tendons import Tendon, TendonRouting, segment_tendon_parts, tendon_energy, tendon_tensions
 
 Site = tuple  # (segment, s) or (segment, s, (ox, oy, oz))
@@ -111,7 +111,7 @@ def _models(model, n_segments: int) -> tuple[StrainModel, tuple[StrainModel, ...
                 f"Scene.model[{i}] must be a strain model (PCC, PAC, PolynomialCurvature), "
                 f"got {m!r}"
             )
-    host = host_model(models)
+    host, models = common_family(models)
     if all(m == host for m in models):
         return host, None
     return host, models
@@ -141,7 +141,8 @@ class Scene(eqx.Module):
     Args:
         robot: the :class:`Robot`.
         model: the strain model (:class:`PCC`, :class:`PAC`, :class:`PolynomialCurvature`), or
-            one per segment from one family (PCC with PAC; polynomials of different orders).
+            one per segment from one family (PCC with PAC; polynomials of different orders,
+            with PCC among them as ``PolynomialCurvature(0)``, the same kinematics).
             ``Scene.model`` is then the family's highest-order member, in whose coordinates
             the kinematics runs; a lower-order segment has fewer coordinates, as does an
             inextensible one (``Segment(extensible=False)``).

@@ -114,7 +114,7 @@ class StrainModel(eqx.Module):
         kinematics with the other coordinates at zero is exactly this model's (PCC is PAC with
         ``c1 = 0``; a polynomial is one of a higher order with zero top coefficients); None
         when it is not. A scene mixes models through their common host
-        (:func:`host_model`)."""
+        (:func:`common_family`)."""
         return tuple(range(self.dofs_per_segment())) if host == self else None
 
     def free_plane_angle(self) -> int | None:
@@ -441,18 +441,28 @@ class PolynomialCurvature(StrainModel):
         return jnp.stack([-ky, kx, tw])
 
 
-def host_model(models) -> StrainModel:
-    """The one model whose kinematics holds every model of ``models`` (see
-    :meth:`StrainModel.embedding`): the highest order of their family. Raises a ValueError for
-    models of different families (polar PCC/PAC with Cartesian polynomials, different frames or
-    twist)."""
+def common_family(models) -> tuple[StrainModel, tuple[StrainModel, ...]]:
+    """``(host, members)``: the one model whose kinematics holds every model of ``models`` (see
+    :meth:`StrainModel.embedding`), the highest order of their family, and the models as that
+    family's members.
+
+    Among polynomials a PCC segment (torsion-free frame) is ``PolynomialCurvature(0)``: the same
+    kinematics (a constant strain vector) in Cartesian coordinates ``kx_0, ky_0``, without the
+    polar plane angle. Raises a ValueError for models no one host holds (PAC among polynomials,
+    whose plane is fixed along the segment; different frames or twist).
+    """
     models = tuple(models)
+    if any(isinstance(m, PolynomialCurvature) and not m.twist for m in models):
+        models = tuple(
+            PolynomialCurvature(0) if isinstance(m, PCC) and m.frame == "torsion_free" else m
+            for m in models
+        )
     for candidate in models:
         if all(m.embedding(candidate) is not None for m in models):
-            return candidate
+            return candidate, models
     raise ValueError(
         "Scene.model: segments may mix models of one family only, PCC with PAC (same frame "
-        "and phi_stiffness) or PolynomialCurvature of different orders (same twist), got "
-        f"{sorted({type(m).__name__ for m in models})}; for a Cartesian constant-curvature "
-        "piece use PolynomialCurvature(order=0)"
+        "and phi_stiffness) or PolynomialCurvature of different orders (same twist; a PCC "
+        "segment among them is PolynomialCurvature(0)), got "
+        f"{sorted({type(m).__name__ for m in models})}"
     )
