@@ -484,3 +484,36 @@ def eqx_replace(segment, rest):
     import equinox as eqx
 
     return eqx.tree_at(lambda s: s.rest_curvature, segment, rest)
+
+
+@pytest.mark.slow  # two more compiled programs (inverse statics, dynamics): CI's slow step
+def test_inverse_statics_and_dynamics_with_mixed_models_and_an_inextensible_segment():
+    segs = [
+        pj.Segment(
+            0.12, 0.015, 300.0, linear_density=0.1, radius=0.01, rest_curvature=[0.3, 0.0, 0.0]
+        ),
+        pj.Segment(0.1, 0.01, 200.0, linear_density=0.08, radius=0.008, extensible=False),
+    ]
+    tendons = [
+        pj.Tendon(1, angle=a, offset=0.008, routing="channel", mode="tension")
+        for a in (0.0, 2.1, 4.2)
+    ]
+    scene = pj.Scene(
+        pj.Robot(segs, base_rotation=np.diag([1.0, -1.0, -1.0])),
+        [pj.PAC(), pj.PCC()],
+        tendons=tendons,
+        loads=[pj.Gravity()],
+    )
+    u = np.array([0.5, 0.0, 0.1])
+    eq = pj.solve_equilibrium(scene, u)
+    target = np.asarray(pj.markers(scene, eq.q, [(1, 1.0)]))[0]
+    inverse = pj.inverse_statics(scene, target, max_tension=5.0)
+    assert inverse.successful
+    reached = np.asarray(pj.markers(scene, inverse.q, [(1, 1.0)])[0])
+    np.testing.assert_allclose(np.linalg.norm(reached - target), inverse.error, rtol=1e-6)
+    assert inverse.error < 1e-4  # the default reached_tol
+    # From rest, released under the equilibrium's tensions, the motion settles towards it.
+    traj = pj.simulate(scene, (0.0, 0.05), u)
+    assert traj.q.shape[-1] == scene.n_dofs == 6
+    assert np.all(np.isfinite(np.asarray(traj.q)))
+    np.testing.assert_array_equal(scene.coordinates(traj.q[-1])[1, [1, 3]], 0.0)  # c1, dL pinned
