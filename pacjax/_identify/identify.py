@@ -152,7 +152,11 @@ def identify(
             stiffening with contraction, added at 0 where a segment has none), ``tendon_gain``
             (``kappa_P`` of the length-mode tendons), ``tendon_offset``, ``mocap_transform``
             (rotation and translation from the world frame to the mocap frame, any axis up),
-            ``marker_offsets`` (each marker's stand-off from the backbone, local frame).
+            ``marker_offsets`` (each marker's stand-off from the backbone, local frame),
+            ``young_modulus`` (Pa: EI, GJ and the axial stiffness in proportion, the section
+            of :attr:`Segment.radius`/``inner_radius`` kept), ``density`` (kg/m^3),
+            ``rest_curvature`` (every segment's, in its model's coordinates; 0 where a
+            segment has none).
             Segment and tendon parameters are one shared factor on the starting values, or one
             value per segment / tendon when named in ``per_segment``.
         validation: held-out frames (or ``holdout``: a random fraction of ``dataset``).

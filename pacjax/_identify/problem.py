@@ -32,6 +32,11 @@ PARAMETERS = {
     "torsion_stiffness": ("segment", "N m^2", True),
     "linear_density": ("segment", "kg/m", True),
     "stiffening": ("segment", "1", False),
+    # Material values of a circular section (Segment.radius, inner_radius): E scales EI, GJ and
+    # the axial stiffness together, rho the linear density.
+    "young_modulus": ("segment", "Pa", True),
+    "density": ("segment", "kg/m^3", True),
+    "rest_curvature": ("rest", "rad", False),
     "tendon_gain": ("tendon", "N/m", True),
     "tendon_offset": ("tendon", "m", True),
     "mocap_transform": ("transform", "rad | m", False),
@@ -105,6 +110,14 @@ class Problem(eqx.Module):
 def _put(scene: Scene, block: Block, value) -> Scene:
     idx = block.targets
     name = block.name
+    if name in ("young_modulus", "density"):
+        return _put_material(scene, name, idx, value)
+    if name == "rest_curvature":
+        sizes = [scene.robot.segments[i].rest_curvature.shape[0] for i in idx]
+        parts = jnp.split(value, np.cumsum(sizes)[:-1])
+        return eqx.tree_at(
+            lambda s: [s.robot.segments[i].rest_curvature for i in idx], scene, list(parts)
+        )
     if name == "stiffening":
         where = lambda s: [s.robot.segments[i].stiffening.rate for i in idx]  # noqa: E731
     elif PARAMETERS[name][0] == "segment":
@@ -121,6 +134,32 @@ def _put(scene: Scene, block: Block, value) -> Scene:
         )
         where = lambda s: [s.tendons[i].offset for i in idx]  # noqa: E731
     return eqx.tree_at(where, scene, [value[k] for k in range(len(idx))])
+
+
+def section_moments(segment) -> tuple:
+    """``(I, A)``: the second moment (m^4) and area (m^2) of a segment's circular section at its
+    base, from ``radius`` and ``inner_radius``."""
+    outer, inner = segment.radius, segment.inner_radius
+    return 0.25 * jnp.pi * (outer**4 - inner**4), jnp.pi * (outer**2 - inner**2)
+
+
+def _put_material(scene: Scene, name: str, idx, value) -> Scene:
+    """Young's modulus: EI = E I, and GJ and the axial stiffness in proportion (Poisson's ratio
+    and the section kept); density: rho A = rho A."""
+    segments = list(scene.robot.segments)
+    for k, i in enumerate(idx):
+        seg = segments[i]
+        second_moment, area = section_moments(seg)
+        if name == "density":
+            segments[i] = eqx.tree_at(lambda x: x.linear_density, seg, value[k] * area)
+            continue
+        ratio = value[k] * second_moment / seg.bending_stiffness
+        segments[i] = eqx.tree_at(
+            lambda x: (x.bending_stiffness, x.torsion_stiffness, x.axial_stiffness),
+            seg,
+            (value[k] * second_moment, seg.torsion_stiffness * ratio, seg.axial_stiffness * ratio),
+        )
+    return eqx.tree_at(lambda s: s.robot.segments, scene, tuple(segments))
 
 
 def _frame_residual(problem: Problem, theta, q, controls, row, meas, mask, rmeas, rmask):
@@ -187,6 +226,8 @@ def make_blocks(scene: Scene, params, per_segment, n_markers) -> tuple[Scene, li
     params = _check_params(params, per_segment)
     if "stiffening" in params:
         scene = _with_stiffening_laws(scene)
+    if "rest_curvature" in params:
+        scene = _with_rest_curvature(scene)
     blocks, initial, labels = [], [], []
     for name in params:
         block, values, label = _block(scene, name, name in per_segment, n_markers)
@@ -209,12 +250,35 @@ def _check_params(params, per_segment) -> tuple:
             raise ValueError(f"unknown parameter {name!r}; known: {', '.join(PARAMETERS)}")
     if len(set(params)) != len(params):
         raise ValueError(f"params lists a parameter twice: {params}")
+    for material, fields in _MATERIAL_FIELDS.items():
+        both = [f for f in fields if material in params and f in params]
+        if both:
+            raise ValueError(
+                f"params: {material} sets {', '.join(fields)}; fit it or {both[0]}, not both"
+            )
     for name in per_segment:
         if name not in params:
             raise ValueError(f"per_segment names {name!r}, which is not in params")
         if PARAMETERS[name][0] not in ("segment", "tendon"):
             raise ValueError(f"per_segment applies to segment and tendon parameters, not {name!r}")
     return params
+
+
+_MATERIAL_FIELDS = {
+    "young_modulus": ("bending_stiffness", "torsion_stiffness", "axial_stiffness"),
+    "density": ("linear_density",),
+}
+
+
+def _with_rest_curvature(scene: Scene) -> Scene:
+    """``scene`` with a zero rest curvature on every segment without one."""
+    segments = tuple(
+        seg
+        if seg.rest_curvature is not None
+        else dataclasses.replace(seg, rest_curvature=np.zeros(model.dofs_per_segment() - 1))
+        for seg, model in zip(scene.robot.segments, scene.models, strict=True)
+    )
+    return eqx.tree_at(lambda s: s.robot.segments, scene, segments)
 
 
 def _with_stiffening_laws(scene: Scene) -> Scene:
@@ -241,6 +305,8 @@ def _block(scene: Scene, name: str, per: bool, n_markers: int) -> tuple[Block, l
         )
     if kind in ("segment", "tendon"):
         size = len(idx) if per else 1
+    elif kind == "rest":
+        size = len(values)
     elif kind == "transform":
         size = 6
     else:
@@ -257,6 +323,8 @@ def _targets(scene: Scene, name: str, kind: str, n_markers: int) -> tuple[tuple,
         idx = tuple(range(scene.n_segments))
         if name == "stiffening":
             values = [float(seg.stiffening.rate) for seg in scene.robot.segments]
+        elif name in ("young_modulus", "density"):
+            values = [_material_value(seg, name, i) for i, seg in enumerate(scene.robot.segments)]
         else:
             values = [float(getattr(seg, name)) for seg in scene.robot.segments]
         return idx, values, [f"[{i}]" for i in idx]
@@ -276,10 +344,30 @@ def _targets(scene: Scene, name: str, kind: str, n_markers: int) -> tuple[tuple,
         attr = "gain" if name == "tendon_gain" else "offset"
         values = [float(getattr(scene.tendons[i], attr)) for i in idx]
         return idx, values, [f"[{i}]" for i in idx]
+    if kind == "rest":
+        idx = tuple(range(scene.n_segments))
+        values, labels = [], []
+        for i, (seg, model) in enumerate(zip(scene.robot.segments, scene.models, strict=True)):
+            values += [float(v) for v in np.asarray(seg.rest_curvature)]
+            labels += [f"[{i}].{c}" for c in model.coordinate_names()[:-1]]
+        return idx, values, labels
     if kind == "transform":
         return (), [0.0] * 6, ["[rx]", "[ry]", "[rz]", "[tx]", "[ty]", "[tz]"]
     idx = tuple(range(n_markers))
     return idx, None, [f"[{j}].{a}" for j in range(n_markers) for a in "xyz"]
+
+
+def _material_value(segment, name: str, i: int) -> float:
+    """A segment's Young's modulus (Pa) or density (kg/m^3), from its section."""
+    if not float(segment.radius) > float(segment.inner_radius):
+        raise ValueError(
+            f"{name}: segment {i} has no section (Segment.radius = {float(segment.radius)} m); "
+            "build it with Segment.from_material or give its radius"
+        )
+    second_moment, area = section_moments(segment)
+    if name == "density":
+        return float(segment.linear_density / area)
+    return float(segment.bending_stiffness / second_moment)
 
 
 def kabsch(world: np.ndarray, measured: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -1,0 +1,100 @@
+"""Identification of material values and rest curvature (issue 26's bodies, fitted): a tapered
+two-segment tendon robot made from known E, rho and rest curvature, 1 mm noise, started 2x off."""
+
+import numpy as np
+import pytest
+
+import pacjax as pj
+
+
+E, RHO = 3.0e5, 1300.0
+REST = ([0.4, -0.3, 0.1, 0.2], [0.2, 0.0, -0.3, 0.1])  # kx_0, kx_1, ky_0, ky_1 per segment
+
+
+def make_scene(e=E, rho=RHO, rest=REST):
+    pieces = [(0.16, 0.012, 0.009), (0.12, 0.009, 0.006)]
+    segments = [
+        pj.Segment.from_material(
+            length, young_modulus=e, density=rho, radius=r0, radius_tip=r1, rest_curvature=c
+        )
+        for (length, r0, r1), c in zip(pieces, rest, strict=True)
+    ]
+    tendons = [
+        pj.Tendon(1, a, 0.006, offset_end=0.003, routing="channel", mode="tension")
+        for a in (0.0, 2.1, 4.2)
+    ]
+    return pj.Scene(
+        pj.Robot(segments, base_rotation=pj.presets.MOUNTS["hanging"]),
+        pj.PolynomialCurvature(1),
+        tendons=tendons,
+        loads=[pj.Gravity()],
+        markers=[(0, 0.33), (0, 0.67), (0, 1.0), (1, 0.33), (1, 0.67), (1, 1.0)],
+    )
+
+
+@pytest.mark.slow  # a fit compiles batched solves and their Jacobians
+def test_young_modulus_density_and_rest_curvature_recovered_from_2x_off():
+    rng = np.random.default_rng(4)
+    n = 48
+    tensions = rng.uniform(0.0, 3.0, (n, 3))
+    payload = rng.choice([0.0, 0.05, 0.1], n)
+    data, _ = pj.synthetic_mocap(
+        make_scene(),
+        tensions,
+        payload_mass=payload,
+        exact=True,
+        noise=1e-3,
+        transform=None,
+        seed=5,
+    )
+    start = make_scene(2 * E, RHO / 2, rest=([0.0] * 4, [0.0] * 4))
+    fitted, report = pj.identify(
+        start, data, ("young_modulus", "density", "rest_curvature"), progress=False
+    )
+    assert report.successful, report.message
+    for name, truth in (("young_modulus", E), ("density", RHO)):
+        p = report.parameters[name]
+        value, std = p["value"][0], p["std"][0]
+        assert abs(value / truth - 1) < 0.03, (name, value, truth)
+        assert abs(value - truth) < 3 * std, (name, value, std)
+    rest = report.parameters["rest_curvature"]
+    truth = np.concatenate(REST)
+    errors = np.abs(np.asarray(rest["value"]) - truth)
+    # The short distal segment's curvature moves the markers little: its coefficients are
+    # known to 0.05-0.11 rad (one std), the base segment's constant term to 0.012 rad.
+    assert np.all(errors < 3 * np.asarray(rest["std"])), (rest["value"], rest["std"])
+    seg = fitted.robot.segments[0]
+    np.testing.assert_allclose(
+        seg.bending_stiffness, report.parameters["young_modulus"]["value"][0] * np.pi * 0.012**4 / 4
+    )
+
+
+@pytest.mark.parametrize(
+    ("params", "message"),
+    [
+        (("young_modulus", "bending_stiffness"), "fit it or bending_stiffness, not both"),
+        (("density", "linear_density"), "fit it or linear_density, not both"),
+    ],
+)
+def test_material_parameters_conflict_with_the_fields_they_set(params, message):
+    scene = make_scene()
+    data = pj.MocapDataset.from_arrays(
+        np.array([[0.0, 0.0, 0.0], [0.5, 0.0, 0.0]]),
+        np.random.default_rng(0).normal(size=(2, 6, 3)),
+        scene.markers,
+    )
+    with pytest.raises(ValueError, match=message):
+        pj.identify(scene, data, params, progress=False)
+
+
+def test_young_modulus_needs_a_section():
+    seg = pj.Segment(0.1, 0.01, 100.0)  # stiffness entered directly, no radius
+    scene = pj.Scene(pj.Robot([seg]), pj.PCC(), loads=[pj.Gravity()], markers=[(0, 1.0)])
+    data = pj.MocapDataset.from_arrays(
+        np.zeros((2, 0)),
+        [[[0.0, 0.0, 0.1]], [[0.0, 0.01, 0.1]]],
+        scene.markers,
+        payload_mass=[0.0, 0.01],
+    )
+    with pytest.raises(ValueError, match="segment 0 has no section"):
+        pj.identify(scene, data, ("young_modulus",), progress=False)
