@@ -6,7 +6,6 @@ import pytest
 
 import pacjax as pj
 
-
 E, RHO = 3.0e5, 1300.0
 REST = ([0.4, -0.3, 0.1, 0.2], [0.2, 0.0, -0.3, 0.1])  # kx_0, kx_1, ky_0, ky_1 per segment
 
