@@ -97,3 +97,47 @@ def test_young_modulus_needs_a_section():
     )
     with pytest.raises(ValueError, match="segment 0 has no section"):
         pj.identify(scene, data, ("young_modulus",), progress=False)
+
+
+@pytest.fixture(scope="module")
+def scaled_robot():
+    """An inextensible polynomial robot with length-mode tendons and no payload: scaling EI,
+    the tendon gain and the density together leaves every pose unchanged, and GJ has no effect
+    (no twist strain)."""
+    seg = pj.Segment(0.2, 0.01, 1e3, linear_density=0.2, radius=0.01, extensible=False)
+    tendons = [
+        pj.Tendon(0, a, 0.008, gain=2e3, guides=(0.0, 0.25, 0.5, 0.75, 1.0))
+        for a in (0.0, 2.1, 4.2)
+    ]
+    scene = pj.Scene(
+        pj.Robot([seg], base_rotation=pj.presets.MOUNTS["horizontal"]),
+        pj.PolynomialCurvature(1),
+        tendons=tendons,
+        loads=[pj.Gravity()],
+        markers=[(0, 0.5), (0, 1.0)],
+    )
+    u = np.random.default_rng(2).uniform(0.0, 0.004, (8, 3))
+    data, _ = pj.synthetic_mocap(scene, u, exact=True, noise=1e-3, transform=None, seed=1)
+    return scene, data
+
+
+@pytest.mark.slow
+def test_a_parameter_without_effect_is_not_identified_never_std_0(scaled_robot):
+    scene, data = scaled_robot
+    _, report = pj.identify(scene, data, ("bending_stiffness", "torsion_stiffness"), progress=False)
+    torsion = report.parameters["torsion_stiffness"]
+    assert torsion["std"] == [None] and torsion["relative_std"] == [None]
+    assert report.identifiable == [True, False]
+    assert report.parameters["bending_stiffness"]["std"][0] > 0
+    assert "Not identified by these data" in report.to_markdown()
+
+
+@pytest.mark.slow
+def test_parameters_that_only_act_together_are_not_identified(scaled_robot):
+    scene, data = scaled_robot
+    _, report = pj.identify(
+        scene, data, ("bending_stiffness", "tendon_gain", "linear_density"), progress=False
+    )
+    assert report.identifiable == [False, False, False]
+    for name in ("bending_stiffness", "tendon_gain", "linear_density"):
+        assert report.parameters[name]["std"] == [None]

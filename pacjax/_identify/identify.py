@@ -372,14 +372,40 @@ def _report(fit: _Fit, train, theta, current, history, stop, t_start, first_eval
     return out_scene, report
 
 
+#: A direction of the internal coordinates whose singular value, with every Jacobian column
+#: scaled to unit norm, is below this fraction of the largest moves the markers too little for
+#: the data to pin it down: its coordinates are "not identified", never given std 0.
+UNIDENTIFIED_RTOL = 1e-7
+
+
 def _covariance(current, n_obs: int, n_theta: int) -> tuple[np.ndarray, np.ndarray]:
     """Laplace / Gauss-Newton covariance ``s^2 (J^T J)^-1`` of the internal coordinates at the
-    optimum, and their standard deviations."""
+    optimum, and their standard deviations.
+
+    Columns are scaled to unit norm first (units must not decide the rank). Coordinates that
+    take part in a direction the data do not see (a zero column: a parameter with no effect;
+    or a combination, e.g. stiffness and density shrinking together) get an infinite standard
+    deviation and NaN covariances; the rest come from the pseudo-inverse on the seen subspace.
+    """
     r, jac = current.stacked()
     dof = max(n_obs - n_theta, 1)
     s2 = float(r @ r) / dof
-    cov = s2 * np.linalg.pinv(jac.T @ jac)
-    return cov, np.sqrt(np.maximum(np.diag(cov), 0.0))
+    norms = np.linalg.norm(jac, axis=0)
+    scaled = jac / np.where(norms > 0, norms, 1.0)
+    _, sv, vt = np.linalg.svd(scaled, full_matrices=True)
+    sv = np.concatenate([sv, np.zeros(n_theta - sv.size)])
+    blind = sv <= UNIDENTIFIED_RTOL * max(sv.max(initial=0.0), np.finfo(float).tiny)
+    unseen = (norms == 0) | np.any(np.abs(vt[blind]) > 0.1, axis=0)
+    seen_sv = np.where(blind, np.inf, sv)
+    cov_scaled = (vt.T / seen_sv**2) @ vt
+    cov = (
+        s2 * cov_scaled / np.outer(np.where(norms > 0, norms, 1.0), np.where(norms > 0, norms, 1.0))
+    )
+    cov[unseen, :] = np.nan
+    cov[:, unseen] = np.nan
+    std = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    std[unseen] = np.inf
+    return cov, std
 
 
 def _parameter_table(fit: _Fit, theta, std_theta, trans) -> tuple[dict, list, list]:
@@ -397,8 +423,9 @@ def _parameter_table(fit: _Fit, theta, std_theta, trans) -> tuple[dict, list, li
             value, start, std = value[:1], start[:1], std[:1]
         parameters[block.name] = _parameter_entry(block, label, start, value, std)
         names += _coordinate_names(block, label)
-        # A log-coordinate with a standard deviation above 1 is not pinned down by the data.
-        identifiable += [bool(s < 1.0) if block.log else True for s in sd]
+        # A log-coordinate with a standard deviation above 1 is not pinned down by the data;
+        # an infinite one is not seen by them at all (_covariance).
+        identifiable += [bool(s < 1.0) if block.log else bool(np.isfinite(s)) for s in sd]
     return parameters, names, identifiable
 
 
@@ -416,7 +443,10 @@ def _block_estimate(fit: _Fit, block, init, th, sd, trans):
 
 
 def _parameter_entry(block, label, start, value, std) -> dict:
-    rel = [float(s / abs(v)) if v != 0 else None for s, v in zip(std, value, strict=True)]
+    rel = [
+        float(s / abs(v)) if v != 0 and np.isfinite(s) else None
+        for s, v in zip(std, value, strict=True)
+    ]
     return {
         "unit": PARAMETERS[block.name][1],
         "labels": list(label),

@@ -128,10 +128,12 @@ class IdentificationReport:
             met, ``max_steps_reached`` at the iteration limit, ``no_equilibrium`` when frames
             stopped converging along the steps.
         message: why the fit stopped, in words.
-        covariance: covariance of the internal coordinates (log-parameters, offsets).
+        covariance: covariance of the internal coordinates (log-parameters, offsets); NaN
+            rows and columns for coordinates the data do not see.
         coordinate_names: names of those coordinates.
-        identifiable: False for a coordinate whose relative standard deviation exceeds 1
-            (the data do not excite it).
+        identifiable: False for a coordinate the data do not see (no effect on the markers,
+            alone or in a combination with others: its ``std`` is None, never 0) or whose
+            relative standard deviation exceeds 1.
         time_s: wall time of the fit; first_evaluation_s: the first batch evaluation,
             compilation included.
         noise: the residual scale (m) used.
@@ -154,6 +156,25 @@ class IdentificationReport:
     time_s: float
     first_evaluation_s: float
     noise: float
+
+    @property
+    def correlations(self) -> np.ndarray:
+        """Correlation matrix of the internal coordinates (NaN where not identified)."""
+        cov = np.asarray(self.covariance, float)
+        std = np.sqrt(np.diag(cov))
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return cov / np.outer(std, std)
+
+    def strong_correlations(self, threshold: float = 0.9) -> list[tuple[str, str, float]]:
+        """Pairs of coordinates whose correlation exceeds ``threshold`` in magnitude: the data
+        constrain their combination better than each of them."""
+        corr, names = self.correlations, self.coordinate_names
+        return [
+            (names[i], names[j], float(corr[i, j]))
+            for i in range(len(names))
+            for j in range(i + 1, len(names))
+            if np.isfinite(corr[i, j]) and abs(corr[i, j]) > threshold
+        ]
 
     @property
     def successful(self) -> bool:
@@ -183,7 +204,7 @@ class IdentificationReport:
             "message": self.message,
             "coordinate_names": list(self.coordinate_names),
             "identifiable": [bool(v) for v in self.identifiable],
-            "covariance": np.asarray(self.covariance).tolist(),
+            "covariance": [_list(row) for row in np.asarray(self.covariance, float)],
             "time_s": self.time_s,
             "first_evaluation_s": self.first_evaluation_s,
             "noise_m": self.noise,
@@ -219,7 +240,15 @@ class IdentificationReport:
             bad = [
                 n for n, ok in zip(self.coordinate_names, self.identifiable, strict=True) if not ok
             ]
-            lines += ["", f"Not identified by these data (relative std > 100 %): {', '.join(bad)}."]
+            lines += [
+                "",
+                "Not identified by these data (no effect on the markers, alone or together "
+                f"with others, or relative std > 100 %): {', '.join(bad)}.",
+            ]
+        strong = self.strong_correlations()
+        if strong:
+            pairs = ", ".join(f"{a} & {b} ({r:+.2f})" for a, b, r in strong)
+            lines += ["", f"Strongly correlated (|r| > 0.9): {pairs}."]
         lines += ["", "## Errors (mm; markers in the mocap frame)", ""]
         lines.append(
             "| frames | n | not converged | RMSE | mean | max | tip mean | orientation mean (deg) |"
