@@ -7,6 +7,8 @@ import pytest
 
 from pacjax._identify.optimise import LevenbergMarquardt as _LevenbergMarquardt
 
+UNBOUNDED = (np.full(3, -np.inf), np.full(3, np.inf))
+
 
 def _problem():
     rng = np.random.default_rng(0)
@@ -19,7 +21,7 @@ def test_step_is_cut_back_to_the_radius_and_predicts_a_decrease():
     lm = _LevenbergMarquardt()
     full = np.linalg.lstsq(jac, -r, rcond=None)[0]
     assert np.max(np.abs(full)) > lm.radius  # the Gauss-Newton step would leave the region
-    step, predicted = lm.step(jac, r)
+    step, predicted = lm.step(jac, r, np.zeros(3), UNBOUNDED)
     assert np.max(np.abs(step)) == pytest.approx(lm.radius)
     assert predicted > 0
     assert step @ (jac.T @ r) < 0  # downhill
@@ -43,3 +45,17 @@ def test_damping_follows_the_gain_ratio():
     for _ in range(10):
         lm.update(0.9, lm.radius, ok=True)
     assert lm.radius == _LevenbergMarquardt.MAX_RADIUS and lm.rejected == 0
+
+
+def test_step_stays_inside_the_bounds_and_holds_a_coordinate_pushed_outwards():
+    jac, r = _problem()
+    g = jac.T @ r
+    theta = np.array([0.0, 0.3, -0.2])
+    # Coordinate 0 sits at a bound that its descent direction (-g) points through.
+    lower = np.array([0.0 if g[0] > 0 else -np.inf, -0.5, -0.25])
+    upper = np.array([np.inf if g[0] > 0 else 0.0, 0.35, 0.1])
+    lm = _LevenbergMarquardt()
+    step, predicted = lm.step(jac, r, theta, (lower, upper))
+    assert step[0] == 0.0
+    assert np.all(theta + step >= lower) and np.all(theta + step <= upper)
+    assert predicted > 0

@@ -1,6 +1,7 @@
 """Identification of material values and rest curvature (issue 26's bodies, fitted): a tapered
 two-segment tendon robot made from known E, rho and rest curvature, 1 mm noise, started 2x off."""
 
+import equinox as eqx
 import numpy as np
 import pytest
 
@@ -141,3 +142,47 @@ def test_parameters_that_only_act_together_are_not_identified(scaled_robot):
     assert report.identifiable == [False, False, False]
     for name in ("bending_stiffness", "tendon_gain", "linear_density"):
         assert report.parameters[name]["std"] == [None]
+
+
+@pytest.mark.slow
+def test_no_fitted_value_leaves_its_bounds(scaled_robot):
+    scene, data = scaled_robot
+    ei = float(scene.robot.segments[0].bending_stiffness)
+
+    def with_ei(value):
+        return eqx.tree_at(lambda s: s.robot.segments[0].bending_stiffness, scene, value)
+
+    # The optimum (the truth) lies below the lower bound: the fit ends on it and says so.
+    fitted, report = pj.identify(
+        with_ei(3 * ei),
+        data,
+        ("bending_stiffness",),
+        bounds={"bending_stiffness": (1.5 * ei, None)},
+        progress=False,
+    )
+    assert float(fitted.robot.segments[0].bending_stiffness) == pytest.approx(1.5 * ei, rel=1e-12)
+    assert report.parameters["bending_stiffness"]["at_bound"] == ["lower"]
+    assert "At a bound" in report.to_markdown()
+    # Random starts and bounds around them: every fitted value inside.
+    rng = np.random.default_rng(7)
+    for _ in range(3):
+        lo, hi = np.sort(rng.uniform(0.3, 3.0, 2)) * ei
+        start = rng.uniform(lo, hi)
+        fitted, report = pj.identify(
+            with_ei(start),
+            data,
+            ("bending_stiffness", "tendon_gain"),
+            bounds={"bending_stiffness": (lo, hi), "tendon_gain": (1e3, 4e3)},
+            progress=False,
+        )
+        value = float(fitted.robot.segments[0].bending_stiffness)
+        assert lo <= value <= hi
+        assert all(1e3 <= float(t.gain) <= 4e3 for t in fitted.tendons)
+    with pytest.raises(ValueError, match="outside its bounds"):
+        pj.identify(
+            with_ei(ei),
+            data,
+            ("bending_stiffness",),
+            bounds={"bending_stiffness": (2 * ei, 3 * ei)},
+            progress=False,
+        )

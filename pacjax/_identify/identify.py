@@ -47,6 +47,7 @@ from .problem import (
     Problem,
     kabsch,
     make_blocks,
+    theta_bounds,
 )
 from .report import FitErrors, IdentificationReport
 
@@ -126,6 +127,7 @@ def identify(
     params: Sequence[str] = ("bending_stiffness",),
     *,
     per_segment: Sequence[str] = (),
+    bounds: dict | None = None,
     validation: MocapDataset | None = None,
     holdout: float = 0.0,
     seed: int = 0,
@@ -159,6 +161,12 @@ def identify(
             segment has none).
             Segment and tendon parameters are one shared factor on the starting values, or one
             value per segment / tendon when named in ``per_segment``.
+        bounds: name -> ``(lower, upper)`` in the parameter's units (None for a side keeps
+            its default), overriding :data:`pacjax._identify.problem.DEFAULT_BOUNDS`: x1e-3 to
+            x1e3 the starting value for stiffnesses, densities per length and gains; E in
+            [1e2, 1e12] Pa; rho in [1, 3e4] kg/m^3; rest curvature within +-4 pi; tendon
+            offsets x0.1 to x10; marker offsets +-0.2 m from the start. No iterate leaves
+            them; the report says which values end at one.
         validation: held-out frames (or ``holdout``: a random fraction of ``dataset``).
         mocap_transform: starting ``(rotation, translation)``. Default: when fitted, the rigid
             alignment (Kabsch) of the starting model's markers to the data; otherwise the
@@ -187,7 +195,9 @@ def identify(
     dataset, validation = _check_data(scene, dataset, validation, holdout, seed)
     _check_settings(loss, noise, orientation_noise, huber_delta, max_iterations, optimizer)
     scales = (noise, orientation_noise, huber_delta if loss == "huber" else None)
-    fit = _build_problem(scene, dataset, validation, params, per_segment, mocap_transform, scales)
+    fit = _build_problem(
+        scene, dataset, validation, params, per_segment, mocap_transform, scales, bounds
+    )
     chunk, batch_options = _batch_settings(chunk_size, options)
     if solver_options is not None:
         _deprecated.warn("identify(solver_options=...)", "identify(options=SolverOptions(...))")
@@ -206,6 +216,7 @@ def identify(
         progress,
         fit.n_observations,
         fit.dataset.markers,
+        fit.bounds,
     )
     return _report(fit, train, theta, current, history, stop, t_start, first_eval_s)
 
@@ -225,6 +236,7 @@ class _Fit:
     rotation0: np.ndarray
     translation0: np.ndarray
     noise: float
+    bounds: tuple  # (lower, upper) of the internal coordinates
 
     @property
     def orient(self) -> bool:
@@ -247,7 +259,7 @@ class _Fit:
 
 
 def _build_problem(
-    scene: Scene, dataset, validation, params, per_segment, mocap_transform, scales
+    scene: Scene, dataset, validation, params, per_segment, mocap_transform, scales, bounds=None
 ) -> _Fit:
     """The parameter blocks, frame loads, starting transform and residual scales ``(noise,
     orientation_noise, huber_delta or None for the quadratic loss)`` of a fit on ``dataset``;
@@ -277,7 +289,8 @@ def _build_problem(
         orientation_noise=jnp.asarray(float(orientation_noise)),
         huber_delta=jnp.asarray(L2_DELTA if huber_delta is None else float(huber_delta)),
     )
-    return _Fit(fit_scene, dataset, validation, problem, labels, rot0, trans0, float(noise))
+    bounds = theta_bounds(blocks, initial, bounds)
+    return _Fit(fit_scene, dataset, validation, problem, labels, rot0, trans0, float(noise), bounds)
 
 
 def _check_validation_kinds(fit_scene: Scene, dataset, validation) -> None:
@@ -391,16 +404,15 @@ def _covariance(current, n_obs: int, n_theta: int) -> tuple[np.ndarray, np.ndarr
     dof = max(n_obs - n_theta, 1)
     s2 = float(r @ r) / dof
     norms = np.linalg.norm(jac, axis=0)
-    scaled = jac / np.where(norms > 0, norms, 1.0)
+    safe = np.where(norms > 0, norms, 1.0)
+    scaled = jac / safe
     _, sv, vt = np.linalg.svd(scaled, full_matrices=True)
     sv = np.concatenate([sv, np.zeros(n_theta - sv.size)])
     blind = sv <= UNIDENTIFIED_RTOL * max(sv.max(initial=0.0), np.finfo(float).tiny)
     unseen = (norms == 0) | np.any(np.abs(vt[blind]) > 0.1, axis=0)
     seen_sv = np.where(blind, np.inf, sv)
     cov_scaled = (vt.T / seen_sv**2) @ vt
-    cov = (
-        s2 * cov_scaled / np.outer(np.where(norms > 0, norms, 1.0), np.where(norms > 0, norms, 1.0))
-    )
+    cov = s2 * cov_scaled / np.outer(safe, safe)
     cov[unseen, :] = np.nan
     cov[:, unseen] = np.nan
     std = np.sqrt(np.maximum(np.diag(cov), 0.0))
@@ -417,11 +429,21 @@ def _parameter_table(fit: _Fit, theta, std_theta, trans) -> tuple[dict, list, li
         problem.blocks, problem.initial, fit.labels, problem.split(theta), strict=True
     ):
         sd = std_theta[k : k + block.size]
+        lower, upper = (b[k : k + block.size] for b in fit.bounds)
         k += block.size
         value, start, std = _block_estimate(fit, block, init, th, sd, trans)
         if len(label) == 1 and value.size > 1:  # one shared factor on equal values
             value, start, std = value[:1], start[:1], std[:1]
-        parameters[block.name] = _parameter_entry(block, label, start, value, std)
+        entry = _parameter_entry(block, label, start, value, std)
+        # Which values the bounds hold (relative to the bound's size: log coordinates).
+        th = np.asarray(th)
+        near = 1e-9 * np.maximum(1.0, np.abs(th))
+        flags = np.where(th <= lower + near, "lower", np.where(th >= upper - near, "upper", ""))
+        if flags.size == len(label):
+            entry["at_bound"] = [f or None for f in flags.tolist()]
+        else:  # one shared factor
+            entry["at_bound"] = [flags[0] or None] * len(label)
+        parameters[block.name] = entry
         names += _coordinate_names(block, label)
         # A log-coordinate with a standard deviation above 1 is not pinned down by the data;
         # an infinite one is not seen by them at all (_covariance).

@@ -7,18 +7,21 @@ import optax
 from .._results import RESULTS
 
 
-def optimise(train, theta, current, optimizer, max_iterations, tol, progress, n_obs, markers):
-    """Levenberg-Marquardt (or optax) iterations from ``theta``; each trial point's equilibria
-    are warm-started from the current ones. Returns the optimum, its evaluation, the loss and
-    RMSE histories and ``(iterations, result, message)``."""
+def optimise(
+    train, theta, current, optimizer, max_iterations, tol, progress, n_obs, markers, bounds
+):
+    """Levenberg-Marquardt (or optax) iterations from ``theta`` within ``bounds = (lower,
+    upper)`` of the internal coordinates (every iterate stays inside them exactly); each trial
+    point's equilibria are warm-started from the current ones. Returns the optimum, its
+    evaluation, the loss and RMSE histories and ``(iterations, result, message)``."""
     history = _History(current, n_obs, markers, max_iterations, progress)
     if isinstance(optimizer, str):
         theta, current, stop = _levenberg_marquardt(
-            train, theta, current, max_iterations, tol, history
+            train, theta, current, max_iterations, tol, history, bounds
         )
     else:
         theta, current, stop = _optax_descent(
-            train, theta, current, optimizer, max_iterations, tol, history
+            train, theta, current, optimizer, max_iterations, tol, history, bounds
         )
     history.bar.close()
     return theta, current, (history.losses, history.rmse), stop
@@ -49,7 +52,7 @@ class _History:
         self.bar.set_postfix_str(f"RMSE {self.rmse[-1]:.3f} mm")
 
 
-def _levenberg_marquardt(train, theta, current, max_iterations, tol, history: _History):
+def _levenberg_marquardt(train, theta, current, max_iterations, tol, history: _History, bounds):
     """The Levenberg-Marquardt loop; returns ``(theta, evaluation, (iterations, result,
     message))``."""
     result, message = RESULTS.max_steps_reached, "iteration limit reached"
@@ -57,7 +60,7 @@ def _levenberg_marquardt(train, theta, current, max_iterations, tol, history: _H
     lm = LevenbergMarquardt()
     while iterations < max_iterations:
         r, jac = current.stacked()
-        step, predicted = lm.step(jac, r)
+        step, predicted = lm.step(jac, r, theta, bounds)
         if predicted <= tol * current.cost():
             result, message = RESULTS.successful, "converged (no decrease left to gain)"
             break
@@ -86,16 +89,20 @@ def _levenberg_marquardt(train, theta, current, max_iterations, tol, history: _H
     return theta, current, (iterations, result, message)
 
 
-def _optax_descent(train, theta, current, optimizer, max_iterations, tol, history: _History):
-    """An optax optimiser driven with the gradient ``J^T r``; returns ``(theta, evaluation,
-    (iterations, result, message))``."""
+def _optax_descent(
+    train, theta, current, optimizer, max_iterations, tol, history: _History, bounds
+):
+    """An optax optimiser driven with the gradient ``J^T r``, each iterate projected onto the
+    bounds; returns ``(theta, evaluation, (iterations, result, message))``."""
     result, message = RESULTS.max_steps_reached, "iteration limit reached"
     iterations = 0
     state = optimizer.init(theta)
     while iterations < max_iterations:
         r, jac = current.stacked()
         updates, state = optimizer.update(jac.T @ r, state, theta)
-        new_theta = np.asarray(optax.apply_updates(theta, updates))
+        new_theta = np.asarray(
+            optax.projections.projection_box(optax.apply_updates(theta, updates), *bounds)
+        )
         trial = train(new_theta, q0=current.q)
         if not np.all(trial.valid[current.valid]):
             result = RESULTS.no_equilibrium
@@ -137,15 +144,25 @@ class LevenbergMarquardt:
     def __init__(self):
         self.damping, self.nu, self.radius, self.rejected = 1e-3, 2.0, 1.0, 0
 
-    def step(self, jac, r):
-        """The damped Gauss-Newton step, cut back to the radius, and its predicted decrease of
-        ``0.5 |r|^2``."""
+    def step(self, jac, r, theta, bounds):
+        """The damped Gauss-Newton step, cut back to the radius and projected onto the bounds,
+        and its predicted decrease of ``0.5 |r|^2``.
+
+        A coordinate at a bound that the gradient pushes outwards is held there (the step is
+        solved in the others: the active set of a projected Gauss-Newton method); the step is
+        then clipped so that ``theta + step`` stays inside the bounds exactly."""
+        lower, upper = bounds
         jtj, g = jac.T @ jac, jac.T @ r
         diag = np.maximum(np.diag(jtj), 1e-12 * max(np.max(np.diag(jtj)), 1e-300))
-        step = np.linalg.solve(jtj + self.damping * np.diag(diag), -g)
-        size = np.max(np.abs(step))
+        free = ~(((theta <= lower) & (g > 0)) | ((theta >= upper) & (g < 0)))
+        step = np.zeros_like(theta)
+        if free.any():
+            system = (jtj + self.damping * np.diag(diag))[np.ix_(free, free)]
+            step[free] = np.linalg.solve(system, -g[free])
+        size = np.max(np.abs(step), initial=0.0)
         if size > self.radius:
             step = step * (self.radius / size)
+        step = np.clip(theta + step, lower, upper) - theta
         return step, -(g @ step + 0.5 * step @ jtj @ step)
 
     def update(self, rho: float, size: float, ok: bool) -> bool:

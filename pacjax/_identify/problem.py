@@ -42,6 +42,23 @@ PARAMETERS = {
     "mocap_transform": ("transform", "rad | m", False),
     "marker_offsets": ("marker", "m", False),
 }
+#: Default physical bounds (lower, upper) of each parameter: absolute numbers, or ``("x", a,
+#: b)`` for ``a`` and ``b`` times the starting value. Positive parameters are fitted in log
+#: space within them; ``identify(bounds=...)`` overrides any of them.
+DEFAULT_BOUNDS = {
+    "bending_stiffness": ("x", 1e-3, 1e3),
+    "axial_stiffness": ("x", 1e-3, 1e3),
+    "torsion_stiffness": ("x", 1e-3, 1e3),
+    "linear_density": ("x", 1e-3, 1e3),
+    "stiffening": (-50.0, 50.0),
+    "young_modulus": (1e2, 1e12),  # Pa: softer than any gel to stiffer than steel
+    "density": (1.0, 3.0e4),  # kg/m^3: foams to tungsten
+    "rest_curvature": (-4.0 * np.pi, 4.0 * np.pi),  # rad per unit s: two turns a segment
+    "tendon_gain": ("x", 1e-3, 1e3),
+    "tendon_offset": ("x", 0.1, 10.0),
+    "mocap_transform": (-np.inf, np.inf),
+    "marker_offsets": (-0.2, 0.2),  # m from the starting offsets
+}
 #: Huber threshold that makes the loss quadratic (squares stay finite in float64).
 L2_DELTA = 1e150
 STEP_SCALE = {"stiffening": 1.0, "mocap_transform": 1.0, "marker_offsets": 0.01}
@@ -368,6 +385,67 @@ def _material_value(segment, name: str, i: int) -> float:
     if name == "density":
         return float(segment.linear_density / area)
     return float(segment.bending_stiffness / second_moment)
+
+
+def theta_bounds(blocks, initial, bounds: dict | None) -> tuple[np.ndarray, np.ndarray]:
+    """Lower and upper bounds of the internal coordinates from the physical ones (the
+    defaults of :data:`DEFAULT_BOUNDS`, overridden by ``bounds``: name -> (lower, upper), None
+    for a default side). Raises a ValueError naming the parameter when a bound is malformed or
+    the starting value lies outside it."""
+    bounds = {} if bounds is None else dict(bounds)
+    unknown = sorted(set(bounds) - {b.name for b in blocks})
+    if unknown:
+        raise ValueError(f"bounds names {unknown}, which are not fitted")
+    lower, upper = [], []
+    for block, init in zip(blocks, initial, strict=True):
+        lo, hi = _physical_bounds(block, init, bounds.get(block.name))
+        if block.name == "mocap_transform":
+            lower.append(np.full(block.size, -np.inf))
+            upper.append(np.full(block.size, np.inf))
+            continue
+        start = np.zeros(block.size) if init is None else np.asarray(init, float).reshape(-1)
+        if init is None or block.name == "marker_offsets":
+            scale = STEP_SCALE.get(block.name, 1.0)
+            lower.append(np.full(block.size, lo / scale))  # offsets: bounds on the change
+            upper.append(np.full(block.size, hi / scale))
+            continue
+        if np.any(start < lo) or np.any(start > hi):
+            raise ValueError(
+                f"bounds: {block.name} starts at {start.tolist()}, outside its bounds "
+                f"[{lo:g}, {hi:g}]"
+            )
+        if block.log:
+            with np.errstate(divide="ignore"):
+                th_lo, th_hi = np.log(lo / start), np.log(hi / start)
+        else:
+            scale = STEP_SCALE.get(block.name, 1.0)
+            th_lo, th_hi = (lo - start) / scale, (hi - start) / scale
+        if block.size != start.size:  # one shared factor: the tightest of its values
+            th_lo, th_hi = np.full(block.size, th_lo.max()), np.full(block.size, th_hi.min())
+        lower.append(th_lo)
+        upper.append(th_hi)
+    return np.concatenate(lower), np.concatenate(upper)
+
+
+def _physical_bounds(block, init, given) -> tuple[float, float]:
+    default = DEFAULT_BOUNDS[block.name]
+    if default[0] == "x":
+        start = np.asarray(init, float)
+        lo, hi = default[1] * start.min(), default[2] * start.max()
+    else:
+        lo, hi = default
+    if given is not None:
+        if not (isinstance(given, (tuple, list)) and len(given) == 2):
+            raise ValueError(f"bounds[{block.name!r}] must be (lower, upper), got {given!r}")
+        lo = lo if given[0] is None else float(given[0])
+        hi = hi if given[1] is None else float(given[1])
+    if not lo < hi or (block.log and not lo > 0):
+        raise ValueError(
+            f"bounds[{block.name!r}] must have lower < upper"
+            + (" and lower > 0 (a positive parameter)" if block.log else "")
+            + f", got ({lo:g}, {hi:g})"
+        )
+    return lo, hi
 
 
 def kabsch(world: np.ndarray, measured: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

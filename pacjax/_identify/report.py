@@ -115,9 +115,10 @@ class IdentificationReport:
     """What :func:`pacjax.identify` found.
 
     Attributes:
-        parameters: name -> ``{"unit", "labels", "initial", "value", "std", "relative_std"}``
-            (lists, one entry per fitted value; ``std`` from the Gauss-Newton / Laplace
-            covariance ``s^2 (J^T J)^-1``, ``s^2`` the residual variance per observation).
+        parameters: name -> ``{"unit", "labels", "initial", "value", "std", "relative_std",
+            "at_bound"}`` (lists, one entry per fitted value; ``std`` from the Gauss-Newton /
+            Laplace covariance ``s^2 (J^T J)^-1``, ``s^2`` the residual variance per
+            observation; ``at_bound`` "lower", "upper" or None).
         loss_history: normalised loss ``sum(rho(r)) / n_observations`` after every accepted
             iteration (the first entry is the start), residuals in units of ``noise``.
         rmse_history_mm: training marker RMSE (mm) along the same iterations.
@@ -229,13 +230,32 @@ class IdentificationReport:
             "| parameter | unit | initial | fitted | std | rel. std |",
         ]
         lines.append("|---|---|---|---|---|---|")
+        bounded = []
         for name, p in self.parameters.items():
-            for label, a, b, s, r in zip(
-                p["labels"], p["initial"], p["value"], p["std"], p["relative_std"], strict=True
+            bounds = p.get("at_bound", [None] * len(p["labels"]))
+            for label, a, b, s, r, at in zip(
+                p["labels"],
+                p["initial"],
+                p["value"],
+                p["std"],
+                p["relative_std"],
+                bounds,
+                strict=True,
             ):
                 rel = "-" if r is None else f"{100 * r:.2g} %"
                 std = "-" if s is None else f"{s:.4g}"
-                lines.append(f"| {name}{label} | {p['unit']} | {a:.6g} | {b:.6g} | {std} | {rel} |")
+                mark = "" if at is None else f" (at its {at} bound)"
+                lines.append(
+                    f"| {name}{label} | {p['unit']} | {a:.6g} | {b:.6g}{mark} | {std} | {rel} |"
+                )
+                if at is not None:
+                    bounded.append(f"{name}{label}")
+        if bounded:
+            lines += [
+                "",
+                f"At a bound (the data push past it; its std is not a confidence): "
+                f"{', '.join(bounded)}.",
+            ]
         if not all(self.identifiable):
             bad = [
                 n for n, ok in zip(self.coordinate_names, self.identifiable, strict=True) if not ok
