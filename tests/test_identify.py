@@ -19,7 +19,7 @@ from click.testing import CliRunner
 import pacjax as pj
 from pacjax.cli.main import cli
 from pacjax.io.mocapfile import save_mocap
-from pacjax.io.scenefile import save_scene
+from pacjax.io.scenefile import load_scene, save_scene
 
 # The whole file runs in CI's slow step:
 # fits compile batched solves and their Jacobians: minutes on 2 cores.
@@ -154,7 +154,13 @@ def test_report_json_and_fitted_scene_file(clean, tmp_path):
 
 def test_cli_fit_writes_scene_report_and_plots(clean, tmp_path):
     data, _ = clean
-    save_scene(tmp_path / "arm.toml", make_scene(2 * TRUE_EI), name="arm")
+    save_scene(
+        tmp_path / "arm.toml",
+        make_scene(2 * TRUE_EI),
+        [0.001, 0.0, 0.002],
+        name="arm",
+        description="three tendons",
+    )
     save_mocap(tmp_path / "frames.csv", data)
     result = CliRunner().invoke(
         cli,
@@ -164,8 +170,8 @@ def test_cli_fit_writes_scene_report_and_plots(clean, tmp_path):
             str(tmp_path / "frames.csv"),
             "--params",
             "bending_stiffness",
-            "--holdout",
-            "0.25",
+            "--holdout-frames",
+            "1, 5,9,12",
             "--out",
             str(tmp_path / "out"),
         ],
@@ -186,6 +192,26 @@ def test_cli_fit_writes_scene_report_and_plots(clean, tmp_path):
     assert report["parameters"]["bending_stiffness"]["value"][0] == pytest.approx(TRUE_EI, rel=1e-5)
     assert report["validation"]["frames"] == 4
     assert "held-out RMSE" in result.output
+    # The fitted scene keeps the input's controls and says what it was fitted to.
+    fitted, controls, extra = load_scene(out / "arm_fitted.toml")
+    np.testing.assert_array_equal(controls, [0.001, 0.0, 0.002])
+    assert extra["name"] == "arm_fitted"
+    assert extra["description"] == "fitted to frames.csv; three tendons"
+    assert float(fitted.robot.segments[0].bending_stiffness) == pytest.approx(TRUE_EI, rel=1e-5)
+    bad = CliRunner().invoke(
+        cli,
+        [
+            "fit",
+            str(tmp_path / "arm.toml"),
+            str(tmp_path / "frames.csv"),
+            "--holdout-frames",
+            "3,99",
+            "--no-plot",
+            "--out",
+            str(tmp_path / "o2"),
+        ],
+    )
+    assert bad.exit_code == 1 and "holdout frame 99 does not exist" in bad.output
 
 
 def test_cli_fit_bad_data_is_one_line(tmp_path):

@@ -186,8 +186,11 @@ class MocapDataset(eqx.Module):
             raise IndexError(f"selection {index!r} holds no frames")
         return out
 
-    def split(self, holdout: float, seed: int = 0) -> tuple[MocapDataset, MocapDataset]:
-        """Random (train, held-out) split with a fraction ``holdout`` of the frames held out."""
+    def split(self, holdout, seed: int = 0) -> tuple[MocapDataset, MocapDataset]:
+        """``(train, held-out)``: a random fraction ``holdout`` of the frames held out, or the
+        frames whose (0-based) indices ``holdout`` lists."""
+        if np.iterable(holdout) and not isinstance(holdout, (str, bytes)):
+            return self._split_frames(holdout)
         if not 0.0 < holdout < 1.0:
             raise ValueError(f"holdout must be a fraction in (0, 1), got {holdout}")
         n_test = int(round(holdout * self.n_frames))
@@ -197,6 +200,22 @@ class MocapDataset(eqx.Module):
             )
         order = np.random.default_rng(seed).permutation(self.n_frames)
         return self[np.sort(order[n_test:])], self[np.sort(order[:n_test])]
+
+    def _split_frames(self, frames) -> tuple[MocapDataset, MocapDataset]:
+        index = np.asarray(list(frames))
+        if index.size == 0 or not np.issubdtype(index.dtype, np.integer):
+            raise ValueError(f"holdout frames must be frame indices (integers), got {frames!r}")
+        bad = index[(index < 0) | (index >= self.n_frames)]
+        if bad.size:
+            raise ValueError(
+                f"holdout frame {int(bad[0])} does not exist (the data have {self.n_frames} "
+                f"frames, 0..{self.n_frames - 1})"
+            )
+        held = np.zeros(self.n_frames, bool)
+        held[index] = True
+        if held.all():
+            raise ValueError("holdout holds out every frame: none is left to fit")
+        return self[np.flatnonzero(~held)], self[np.flatnonzero(held)]
 
     def conditions(self) -> np.ndarray:
         """(frames, k) the inputs of each frame: controls, payload, force."""

@@ -90,9 +90,10 @@ def _check_data(
     """The checked training and held-out frames (``holdout``: split off ``dataset``)."""
     check_scene(scene)
     _check(scene, dataset, "dataset")
-    if validation is not None and holdout:
+    chosen = np.iterable(holdout) and not isinstance(holdout, (str, bytes))
+    if validation is not None and (chosen or holdout):
         raise ValueError("give either validation= or holdout=, not both")
-    if holdout:
+    if chosen or holdout:
         dataset, validation = dataset.split(holdout, seed)
     if validation is not None:
         _check(scene, validation, "validation")
@@ -129,7 +130,7 @@ def identify(
     per_segment: Sequence[str] = (),
     bounds: dict | None = None,
     validation: MocapDataset | None = None,
-    holdout: float = 0.0,
+    holdout: float | Sequence[int] = 0.0,
     seed: int = 0,
     mocap_transform=None,
     noise: float = 1e-3,
@@ -167,7 +168,8 @@ def identify(
             [1e2, 1e12] Pa; rho in [1, 3e4] kg/m^3; rest curvature within +-4 pi; tendon
             offsets x0.1 to x10; marker offsets +-0.2 m from the start. No iterate leaves
             them; the report says which values end at one.
-        validation: held-out frames (or ``holdout``: a random fraction of ``dataset``).
+        validation: held-out frames (or ``holdout``: a random fraction of ``dataset``, or
+            the 0-based indices of the frames to hold out).
         mocap_transform: starting ``(rotation, translation)``. Default: when fitted, the rigid
             alignment (Kabsch) of the starting model's markers to the data; otherwise the
             identity (the data are in the scene's world frame).

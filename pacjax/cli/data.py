@@ -37,6 +37,11 @@ def _names(text: str) -> tuple[str, ...]:
     type=click.FloatRange(0.0, 0.9),
     help="Fraction of frames held out for validation (0: none).",
 )
+@click.option(
+    "--holdout-frames",
+    default="",
+    help="Comma-separated 0-based frame numbers to hold out (instead of --holdout).",
+)
 @click.option("--loss", type=click.Choice(["l2", "huber"]), default="l2", show_default=True)
 @click.option("--noise", default=1e-3, show_default=True, help="Marker noise scale, m.")
 @click.option("--max-iterations", default=50, show_default=True, type=click.IntRange(min=0))
@@ -55,6 +60,7 @@ def fit(
     params,
     per_segment,
     holdout,
+    holdout_frames,
     loss,
     noise,
     max_iterations,
@@ -71,9 +77,16 @@ def fit(
     from ..io.scenefile import load_scene
 
     try:
-        scene, _, extra = load_scene(scene_file)
+        scene, controls, extra = load_scene(scene_file)
     except (ValueError, OSError) as err:
         raise click.ClickException(str(err)) from None
+    if holdout_frames:
+        try:
+            holdout = [int(x) for x in _names(holdout_frames)]
+        except ValueError:
+            raise click.ClickException(
+                f"--holdout-frames must be comma-separated frame numbers, got {holdout_frames!r}"
+            ) from None
     _reject_motive_export(data_file)
     try:
         data = load_mocap(data_file)
@@ -92,7 +105,12 @@ def fit(
     except (ValueError, TypeError) as err:
         raise click.ClickException(str(err)) from None
     name = extra["name"]
-    paths = _write_fit(output_dir(out), name, fitted, report, no_plot)
+    description = f"fitted to {os.path.basename(data_file)}" + (
+        f"; {extra['description']}" if extra["description"] else ""
+    )
+    paths = _write_fit(
+        output_dir(out), name, fitted, report, no_plot, controls, description, extra["solver"]
+    )
     _echo_fit(name, report)
     for path in paths.values():
         click.echo(f"wrote {path}")
@@ -109,9 +127,12 @@ def _reject_motive_export(data_file: str) -> None:
             )
 
 
-def _write_fit(out: str, name: str, fitted, report, no_plot: bool) -> dict:
-    """The fitted scene, the report (JSON, Markdown) and, unless ``no_plot``, the figures;
-    returns ``{what: path}`` in the order written."""
+def _write_fit(
+    out: str, name: str, fitted, report, no_plot: bool, controls, description, solver
+) -> dict:
+    """The fitted scene (with the input scene's controls, solver options and description),
+    the report (JSON, Markdown) and, unless ``no_plot``, the figures; returns ``{what: path}``
+    in the order written."""
     from ..io.scenefile import save_scene
 
     paths = {
@@ -119,7 +140,14 @@ def _write_fit(out: str, name: str, fitted, report, no_plot: bool) -> dict:
         "json": os.path.join(out, f"{name}_fit.json"),
         "md": os.path.join(out, f"{name}_fit.md"),
     }
-    save_scene(paths["scene"], fitted, name=f"{name} (fitted)")
+    save_scene(
+        paths["scene"],
+        fitted,
+        controls if fitted.n_tendons else None,
+        name=f"{name}_fitted",
+        description=description,
+        solver=solver or None,
+    )
     report.to_json(paths["json"])
     with open(paths["md"], "w", encoding="utf-8") as f:
         f.write(report.to_markdown())

@@ -196,7 +196,12 @@ def _table_text(header: str, table: dict) -> str:
 
 
 def scene_to_toml(
-    scene: Scene, controls=None, *, solver: dict | None = None, name: str | None = None
+    scene: Scene,
+    controls=None,
+    *,
+    solver: dict | None = None,
+    name: str | None = None,
+    description: str | None = None,
 ) -> str:
     """The scene file text of ``scene`` (explicit form: segments, robot, tendons, loads).
 
@@ -209,10 +214,13 @@ def scene_to_toml(
         controls: optional controls (one per tendon) to store with it.
         solver: optional keyword arguments for :func:`pacjax.solve_equilibrium`.
         name: optional scene name.
+        description: optional description.
     """
     top: dict = {}
     if name is not None:
         top["name"] = name
+    if description is not None:
+        top["description"] = description
     if controls is not None:
         values = _vector(controls)
         if len(values) != scene.n_tendons:
