@@ -14,7 +14,7 @@ publication's values (E ~ 3.15e5 Pa, rho ~ 1320 kg/m^3; 22.9 mm in-sample with i
 9-coordinate model). Writes ``results/real_tentacle.json``, ``results/real_tentacle.md`` and
 ``results/real_tentacle.png`` (measured markers and predicted backbones of every take).
 
-    python experiments/real_tentacle/study.py [--model poly2|poly1|poly3|pac-pcc]
+    python experiments/real_tentacle/study.py [--model poly3|poly2|poly1|pac-pcc]
 """
 
 from __future__ import annotations
@@ -200,5 +200,5 @@ def figure(names, measured, predicted, spines, result, path: Path) -> None:
 
 if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--model", choices=tuple(MODELS), default="poly2")
+    parser.add_argument("--model", choices=tuple(MODELS), default="poly3")
     main(parser.parse_args().model)
