@@ -62,6 +62,20 @@ def _array(name: str, x, shape: tuple, allow_nan: bool = False) -> np.ndarray:
     return a
 
 
+def _base_rotations(value, n_frames: int) -> np.ndarray:
+    """(frames, 3, 3) proper rotations, or a ValueError naming ``base_rotation``."""
+    r = _array("base_rotation", value, (n_frames, 3, 3))
+    eye = np.broadcast_to(np.eye(3), r.shape)
+    bad = ~np.all(np.isclose(np.swapaxes(r, -1, -2) @ r, eye, atol=1e-6), axis=(1, 2))
+    bad |= np.linalg.det(r) < 0
+    if bad.any():
+        raise ValueError(
+            f"base_rotation[{int(np.flatnonzero(bad)[0])}] is not a proper rotation matrix "
+            "(R^T R = I, det 1)"
+        )
+    return r
+
+
 class MocapDataset(eqx.Module):
     """Static frames of a motion-capture session (build with :meth:`from_arrays`).
 
@@ -78,6 +92,9 @@ class MocapDataset(eqx.Module):
         orientations: (frames, m, 3, 3) measured rotations (mocap frame) at the sites, NaN where
             missing, or None.
         time: (frames,) s, or None.
+        base_rotation: (frames, 3, 3) the robot's base orientation (base frame -> world) in
+            each frame, for data taken with the base turned from frame to frame (the scene's
+            own ``Robot.base_rotation`` is then replaced), or None.
     """
 
     controls: np.ndarray
@@ -90,6 +107,7 @@ class MocapDataset(eqx.Module):
     force_follower: bool = eqx.field(static=True, default=False)
     orientations: np.ndarray | None = None
     time: np.ndarray | None = None
+    base_rotation: np.ndarray | None = None
 
     @classmethod
     def from_arrays(
@@ -105,6 +123,7 @@ class MocapDataset(eqx.Module):
         force_follower: bool = False,
         orientations=None,
         time=None,
+        base_rotation=None,
     ) -> MocapDataset:
         """Validate and wrap arrays (SI units: m, kg, N; see the class attributes).
 
@@ -126,6 +145,8 @@ class MocapDataset(eqx.Module):
             orientations = _orientations(orientations, n_frames, n_markers)
         if time is not None:
             time = _array("time", time, (n_frames,))
+        if base_rotation is not None:
+            base_rotation = _base_rotations(base_rotation, n_frames)
         return cls(
             controls=controls,
             markers=markers,
@@ -137,6 +158,7 @@ class MocapDataset(eqx.Module):
             force_follower=bool(force_follower),
             orientations=orientations,
             time=time,
+            base_rotation=base_rotation,
         )
 
     # ------------------------------------------------------------------------- structure
@@ -181,6 +203,7 @@ class MocapDataset(eqx.Module):
             force_follower=self.force_follower,
             orientations=pick(self.orientations),
             time=pick(self.time),
+            base_rotation=pick(self.base_rotation),
         )
         if out.n_frames == 0:
             raise IndexError(f"selection {index!r} holds no frames")
@@ -224,6 +247,8 @@ class MocapDataset(eqx.Module):
             cols.append(self.payload_mass[:, None])
         if self.force is not None:
             cols.append(self.force)
+        if self.base_rotation is not None:
+            cols.append(self.base_rotation.reshape(self.n_frames, 9))
         return np.concatenate(cols, axis=1)
 
     @classmethod

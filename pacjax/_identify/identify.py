@@ -298,10 +298,13 @@ def _build_problem(
 def _check_validation_kinds(fit_scene: Scene, dataset, validation) -> None:
     """Raise unless ``validation`` carries the loads and orientations ``dataset`` does."""
     with_frame_loads(fit_scene, validation)  # same checks
-    if (validation.payload_mass is None) != (dataset.payload_mass is None) or (
-        validation.force is None
-    ) != (dataset.force is None):
-        raise ValueError("validation must carry the same kinds of loads as dataset")
+    if any(
+        (getattr(validation, k) is None) != (getattr(dataset, k) is None)
+        for k in ("payload_mass", "force", "base_rotation")
+    ):
+        raise ValueError(
+            "validation must carry the same kinds of loads (and base orientations) as dataset"
+        )
     if dataset.orientations is not None and validation.orientations is None:
         raise ValueError("dataset has orientations but validation does not")
 

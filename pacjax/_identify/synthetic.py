@@ -188,6 +188,7 @@ def synthetic_mocap(
     force=None,
     force_site=None,
     force_follower: bool = False,
+    base_rotation=None,
     noise: float = 1e-3,
     dropout: float = 0.0,
     transform="random",
@@ -206,8 +207,8 @@ def synthetic_mocap(
         scene: the robot with the true parameters.
         controls: (frames, n_tendons) commands.
         sites: marker sites (default: the scene's markers).
-        payload_mass, payload_site, force, force_site, force_follower: per-frame loads, as in
-            :meth:`MocapDataset.from_arrays`.
+        payload_mass, payload_site, force, force_site, force_follower, base_rotation:
+            per-frame loads and base orientations, as in :meth:`MocapDataset.from_arrays`.
         noise: standard deviation (m) of the Gaussian noise on each marker coordinate.
         dropout: probability that a marker is missing in a frame (NaN).
         transform: ``"random"`` (uniform random rotation, translation within 1 m), None
@@ -231,14 +232,17 @@ def synthetic_mocap(
         force=force,
         force_site=force_site,
         force_follower=force_follower,
+        base_rotation=base_rotation,
     )
     truth_scene = _with_markers(scene, sites)
     if not exact:
         truth_scene = high_fidelity(
             truth_scene, model=model, subdivisions=subdivisions, stiffening_rate=stiffening_rate
         )
-    loaded, q, ok = _truth_equilibria(scene, truth_scene, template, controls, solver_options)
-    world, rots = _site_poses(loaded, truth_scene.markers, q)
+    loaded, q, ok, frames = _truth_equilibria(
+        scene, truth_scene, template, controls, solver_options
+    )
+    world, rots = _site_poses(frames, truth_scene.markers, q)
     rotation, translation = _mocap_transform(transform, rng)
     measured = _measured_markers(world, rotation, translation, noise, dropout, rng)
     ori = None
@@ -283,19 +287,25 @@ def _truth_equilibria(scene: Scene, truth_scene: Scene, template, controls, solv
         warnings.warn(  # at the caller of synthetic_mocap
             f"{int((~ok).sum())} synthetic frame(s) did not converge; left out", stacklevel=3
         )
-    return loaded, np.asarray(eq.q)[ok], ok
+    # Each kept frame's scene (its loads and base orientation), for the marker poses.
+    frames = [
+        loaded if rows is None else frame_loads(loaded, {k: v[i] for k, v in rows.items()})
+        for i in np.flatnonzero(ok)
+    ]
+    return loaded, np.asarray(eq.q)[ok], ok, frames
 
 
-def _site_poses(loaded: Scene, markers, q) -> tuple[np.ndarray, np.ndarray]:
-    """(frames, m, 3) positions and (frames, m, 3, 3) rotations at the marker sites (world)."""
+def _site_poses(frames: list, markers, q) -> tuple[np.ndarray, np.ndarray]:
+    """(frames, m, 3) positions and (frames, m, 3, 3) rotations at the marker sites (world),
+    each frame in its own scene."""
     from .._model.query import site_frames
 
     segs = np.asarray([x[0] for x in markers])
     ss = np.asarray([x[1] for x in markers])
     offs = np.asarray([x[2] for x in markers])
     world, rots = [], []
-    for qk in q:
-        pos, rot = site_frames(loaded, qk, segs, ss, offs)
+    for scene_k, qk in zip(frames, q, strict=True):
+        pos, rot = site_frames(scene_k, qk, segs, ss, offs)
         world.append(np.asarray(pos))
         rots.append(np.asarray(rot))
     return np.stack(world), np.stack(rots)
@@ -347,13 +357,14 @@ def _kept_frames(template: MocapDataset, keep, measured, orientations) -> MocapD
         force_site=template.force_site,
         force_follower=template.force_follower,
         orientations=orientations,
+        base_rotation=None if template.base_rotation is None else template.base_rotation[keep],
     )
 
 
 def _with_markers(scene: Scene, sites) -> Scene:
     return Scene(
         scene.robot,
-        scene.model,
+        scene.models,
         tendons=scene.tendons,
         loads=scene.loads,
         markers=sites,

@@ -1,4 +1,5 @@
-"""Per-frame loads of a motion-capture dataset (payload mass, external force) in a scene.
+"""Per-frame loads of a motion-capture dataset (payload mass, external force, the base's
+orientation) in a scene.
 
 A dataset's payload and force change from frame to frame; the scene gets one
 :class:`PointMass` and/or one :class:`PointForce` appended (structure), and
@@ -21,8 +22,11 @@ class FrameLoads(eqx.Module):
 
     mass_index: int | None = eqx.field(static=True, default=None)
     force_index: int | None = eqx.field(static=True, default=None)
+    base_rotation: bool = eqx.field(static=True, default=False)
 
     def __call__(self, scene: Scene, row) -> Scene:
+        if self.base_rotation:
+            scene = eqx.tree_at(lambda s: s.robot.base_rotation, scene, row["base_rotation"])
         if self.mass_index is not None:
             scene = eqx.tree_at(lambda s: s.loads[self.mass_index].mass, scene, row["mass"])
         if self.force_index is not None:
@@ -36,6 +40,8 @@ class FrameLoads(eqx.Module):
             out["mass"] = np.asarray(dataset.payload_mass, dtype)
         if self.force_index is not None:
             out["force"] = np.asarray(dataset.force, dtype)
+        if self.base_rotation:
+            out["base_rotation"] = np.asarray(dataset.base_rotation, dtype)
         return out or None
 
 
@@ -75,4 +81,4 @@ def with_frame_loads(scene: Scene, dataset) -> tuple[Scene, FrameLoads]:
         quadrature_points=scene.quadrature_points,
         rotation_substeps=scene.rotation_substeps,
     )
-    return new, FrameLoads(mass_index, force_index)
+    return new, FrameLoads(mass_index, force_index, dataset.base_rotation is not None)
