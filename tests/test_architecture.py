@@ -40,6 +40,8 @@ LAYERS = (
             "pacjax._model.channels",
             "pacjax._model.energy",
             "pacjax._model.energy_plan",
+            "pacjax._model.sites",
+            "pacjax._model.layout",
         ),
     ),
     # the scene: assembly, its derivatives, inputs checked against it, queries, presets

@@ -34,7 +34,8 @@ import optax
 from .. import _deprecated
 from .._model.frameloads import with_frame_loads
 from .._model.inputs import check_scene
-from .._model.scene import Scene, normalise_sites
+from .._model.scene import Scene
+from .._model.sites import normalise_sites
 from .._statics.options import SolverOptions, resolve_options
 from .dataset import MocapDataset
 from .optimise import optimise

@@ -16,7 +16,8 @@ import numpy as np
 from .._model.frameloads import with_frame_loads
 from .._model.loads import Gravity, PointForce, PointMass, PointMoment
 from .._model.robot import ExponentialStiffening, Robot, Segment
-from .._model.scene import Scene, normalise_sites
+from .._model.scene import Scene
+from .._model.sites import normalise_sites
 from .._model.strain import PolynomialCurvature, StrainModel
 from .._model.tendons import Tendon
 from .._statics.batch import solve_batch

@@ -15,7 +15,8 @@ from jaxtyping import Array, Bool, Float, Int
 from .._config import MATMUL_PRECISION
 from .._jit import jit
 from .._model.rotation import matvec3
-from .._model.scene import Scene, normalise_sites
+from .._model.scene import Scene
+from .._model.sites import normalise_sites
 from .._statics.equilibrium import linearised_equilibrium
 from .._statics.options import SolverOptions
 

@@ -9,7 +9,8 @@ from jaxtyping import Array, Float
 from .._jit import jit
 from .inputs import check_controls, check_q, check_scene
 from .rotation import matvec3
-from .scene import Scene, normalise_sites
+from .scene import Scene
+from .sites import normalise_sites
 
 
 @jit

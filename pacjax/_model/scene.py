@@ -32,56 +32,13 @@ from .kinematics import (
     segment_knot_jacobian,
     take_runs,
 )
+from .layout import free_coordinates, rest_coordinates, split_models
 from .loads import Gravity, PointForce, PointMass, PointMoment
 from .robot import Robot, concrete, known_sites
 from .rotation import matmul3, matvec3
-from .strain import StrainModel, common_family
+from .sites import normalise_sites
+from .strain import StrainModel
 from .tendons import Tendon, TendonRouting, segment_tendon_parts, tendon_energy, tendon_tensions
-
-Site = tuple  # (segment, s) or (segment, s, (ox, oy, oz))
-
-
-def normalise_sites(sites, n_segments: int, owner: str = "sites") -> tuple:
-    """Validate marker sites and return them as ``((segment, s, (ox, oy, oz)), ...)``."""
-    if isinstance(sites, (str, bytes)) or not np.iterable(sites):
-        raise TypeError(f"{owner} must be a sequence of (segment, s) sites, got {sites!r}")
-    out = []
-    for i, site in enumerate(sites):
-        if not isinstance(site, (tuple, list)) or len(site) not in (2, 3):
-            raise ValueError(
-                f"{owner}[{i}] must be (segment, s) or (segment, s, offset_xyz), got {site!r}"
-            )
-        seg, s = site[0], site[1]
-        if (
-            not isinstance(seg, (int, np.integer))
-            or isinstance(seg, (bool, np.bool_))
-            or not 0 <= seg < n_segments
-        ):
-            raise ValueError(
-                f"{owner}[{i}]: segment {seg!r} does not exist (robot has {n_segments})"
-            )
-        if not _is_real(s) or not (np.isfinite(s) and 0.0 <= s <= 1.0):
-            raise ValueError(f"{owner}[{i}]: s must lie in [0, 1], got {s!r}")
-        offset = site[2] if len(site) == 3 else (0.0, 0.0, 0.0)
-        if (
-            not np.iterable(offset)
-            or len(offset) != 3
-            or not all(_is_real(v) for v in offset)
-            or not np.all(np.isfinite(np.asarray(offset, float)))
-        ):
-            raise ValueError(f"{owner}[{i}]: offset must be 3 finite numbers, got {offset!r}")
-        offset = tuple(float(v) for v in offset)
-        out.append((int(seg), float(s), offset))
-    return tuple(out)
-
-
-def _is_real(x) -> bool:
-    """A plain real number (Python or numpy scalar, or a 0-d array), not a bool or a string."""
-    if isinstance(x, (bool, np.bool_)) or np.ndim(x) != 0:
-        return False
-    return np.issubdtype(np.asarray(x).dtype, np.floating) or np.issubdtype(
-        np.asarray(x).dtype, np.integer
-    )
 
 
 def _sequence(owner: str, items, kind: str) -> tuple:
@@ -94,27 +51,6 @@ def _count(owner: str, value) -> int:
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
         raise TypeError(f"{owner} must be an integer, got {value!r}")
     return int(value)
-
-
-def _models(model, n_segments: int) -> tuple[StrainModel, tuple[StrainModel, ...] | None]:
-    """``(Scene.model, Scene.segment_models)`` from one model or one per segment."""
-    if isinstance(model, StrainModel) or not isinstance(model, (list, tuple)):
-        return model, None
-    models = tuple(model)
-    if len(models) != n_segments:
-        raise ValueError(
-            f"Scene.model: one model per segment needs {n_segments}, got {len(models)}"
-        )
-    for i, m in enumerate(models):
-        if not isinstance(m, StrainModel):
-            raise TypeError(
-                f"Scene.model[{i}] must be a strain model (PCC, PAC, PolynomialCurvature), "
-                f"got {m!r}"
-            )
-    host, models = common_family(models)
-    if all(m == host for m in models):
-        return host, None
-    return host, models
 
 
 class SceneConstants(eqx.Module):
@@ -178,7 +114,7 @@ class Scene(eqx.Module):
         if not isinstance(robot, Robot):
             raise TypeError(f"Scene.robot must be a Robot, got {type(robot).__name__}")
         self.robot = robot
-        self.model, self.segment_models = _models(model, robot.n_segments)
+        self.model, self.segment_models = split_models(model, robot.n_segments)
         self.tendons = _sequence("Scene.tendons", tendons, "Tendons")
         self.loads = _sequence("Scene.loads", loads, "loads")
         self.markers = normalise_sites(markers, robot.n_segments, "Scene.markers")
@@ -283,16 +219,7 @@ class Scene(eqx.Module):
 
         A lower-order segment's missing coefficients and an inextensible segment's ``dL`` are
         pinned at zero: not coordinates at all (not solved for, not in ``q``)."""
-        d = self.dofs_per_segment
-        index = []
-        for i, (seg, model) in enumerate(zip(self.robot.segments, self.models, strict=True)):
-            own = list(model.embedding(self.model))
-            if not seg.extensible:
-                own = own[:-1]
-            index += [i * d + k for k in own]
-        if len(index) == self.n_segments * d:
-            return None
-        return np.asarray(index, np.int64)
+        return free_coordinates(self.robot, self.models, self.model)
 
     @property
     def n_dofs(self) -> int:
@@ -345,17 +272,7 @@ class Scene(eqx.Module):
     def rest_coordinates(self, dtype=float) -> Float[Array, "n d"] | None:
         """Every segment's :attr:`Segment.rest_curvature` in :attr:`model`'s layout (``dL``
         0), or None when every segment is straight at rest."""
-        segments = self.robot.segments
-        if all(seg.rest_curvature is None for seg in segments):
-            return None
-        rows = []
-        for seg, model in zip(segments, self.models, strict=True):
-            row = jnp.zeros(self.dofs_per_segment, dtype)
-            if seg.rest_curvature is not None:
-                index = np.asarray(model.embedding(self.model)[:-1])
-                row = row.at[index].set(seg.rest_curvature.astype(dtype))
-            rows.append(row)
-        return jnp.stack(rows)
+        return rest_coordinates(self.robot, self.models, self.model, dtype)
 
     def rest_configuration(self, dtype=float) -> Float[Array, " n_dofs"]:
         """The unloaded configuration: every segment at its rest curvature, ``dL = 0``."""

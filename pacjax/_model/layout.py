@@ -1,0 +1,66 @@
+"""The coordinate layout of a scene: which strain model each segment uses, which coordinates
+of the kinematics' per-segment layout are coordinates at all, and the rest configuration in it.
+
+The kinematics runs every segment in one model, the family's highest member
+(:func:`pacjax._model.strain.common_family`); a lower-order segment's missing coefficients and
+an inextensible segment's ``dL`` are pinned at zero there, and the flat coordinates ``q`` hold
+the others only.
+"""
+
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float
+
+from .robot import Robot
+from .strain import StrainModel, common_family
+
+
+def split_models(model, n_segments: int) -> tuple[StrainModel, tuple[StrainModel, ...] | None]:
+    """``(Scene.model, Scene.segment_models)`` from one model or one per segment."""
+    if isinstance(model, StrainModel) or not isinstance(model, (list, tuple)):
+        return model, None
+    models = tuple(model)
+    if len(models) != n_segments:
+        raise ValueError(
+            f"Scene.model: one model per segment needs {n_segments}, got {len(models)}"
+        )
+    for i, m in enumerate(models):
+        if not isinstance(m, StrainModel):
+            raise TypeError(
+                f"Scene.model[{i}] must be a strain model (PCC, PAC, PolynomialCurvature), "
+                f"got {m!r}"
+            )
+    host, models = common_family(models)
+    if all(m == host for m in models):
+        return host, None
+    return host, models
+
+
+def free_coordinates(robot: Robot, models, host: StrainModel) -> np.ndarray | None:
+    """Positions of the coordinates among the flat ``(segments, host dofs)`` layout, or None
+    when every entry is a coordinate."""
+    d = host.dofs_per_segment()
+    index = []
+    for i, (seg, model) in enumerate(zip(robot.segments, models, strict=True)):
+        own = list(model.embedding(host))
+        if not seg.extensible:
+            own = own[:-1]
+        index += [i * d + k for k in own]
+    if len(index) == robot.n_segments * d:
+        return None
+    return np.asarray(index, np.int64)
+
+
+def rest_coordinates(robot: Robot, models, host: StrainModel, dtype) -> Float[Array, "n d"] | None:
+    """Every segment's rest curvature in the host's layout (``dL`` 0), or None when every
+    segment is straight at rest."""
+    if all(seg.rest_curvature is None for seg in robot.segments):
+        return None
+    rows = []
+    for seg, model in zip(robot.segments, models, strict=True):
+        row = jnp.zeros(host.dofs_per_segment(), dtype)
+        if seg.rest_curvature is not None:
+            index = np.asarray(model.embedding(host)[:-1])
+            row = row.at[index].set(seg.rest_curvature.astype(dtype))
+        rows.append(row)
+    return jnp.stack(rows)
