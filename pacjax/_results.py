@@ -32,6 +32,11 @@ class RESULTS(eqx.Enumeration):
         "the integration stopped before the final time: the step size fell below its minimum "
         "or the implicit stage equations did not converge"
     )
+    converged_saddle = (
+        "converged to an unstable equilibrium (a saddle or a maximum: the residual is below "
+        "tolerance but the stiffness is not positive definite, and no escape along its "
+        "negative curvature left it); `converged` is True, `stable` False"
+    )
 
 
 _ITEM = jtu.tree_structure(RESULTS.successful)
@@ -62,3 +67,4 @@ SUCCESSFUL = int(code_of(RESULTS.successful))
 MAX_STEPS_REACHED = int(code_of(RESULTS.max_steps_reached))
 NONFINITE = int(code_of(RESULTS.nonfinite))
 STALLED = int(code_of(RESULTS.stalled))
+CONVERGED_SADDLE = int(code_of(RESULTS.converged_saddle))

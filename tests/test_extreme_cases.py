@@ -91,7 +91,9 @@ def _assert_explicit(eq, grad, tol):
     """Converged with a finite equilibrium and gradient, or an explicit failure flag."""
     q = np.asarray(eq.q)
     if bool(eq.converged):
-        assert bool(eq.successful) and eq.reason == "converged"
+        # A converged saddle is flagged, not successful.
+        assert bool(eq.successful) == bool(eq.stable)
+        assert eq.reason == ("converged" if bool(eq.stable) else pj.RESULTS[eq.result])
         assert float(eq.residual_norm) <= tol
         assert np.all(np.isfinite(q)), q
         assert np.isfinite(float(eq.energy))

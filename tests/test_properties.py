@@ -144,7 +144,9 @@ def _check_equilibrium(scene, controls, seed):
 
     # Convergence is reported explicitly, and consistently.
     assert converged == (residual_norm <= TOL), (converged, residual_norm)
-    assert bool(eq.successful) == converged, eq.reason
+    assert bool(eq.successful) == (converged and bool(eq.stable)), eq.reason
+    if converged and not bool(eq.stable):
+        assert bool(eq.result == pj.RESULTS.converged_saddle), eq.reason
     if not converged:
         assert eq.reason != "converged"
         return eq

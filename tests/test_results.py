@@ -142,3 +142,17 @@ def test_each_workflow_reports_a_result():
     data, _ = pj.synthetic_mocap(SCENE, np.array([[0.0], [0.002], [0.004]]), sites=((0, 1.0),))
     _, report = pj.identify(SCENE, data, params=("bending_stiffness",))
     assert isinstance(report.result, pj.RESULTS) and report.successful, report.message
+
+
+def test_a_converged_saddle_is_flagged_not_successful():
+    # A heavy column standing upright: straight is an equilibrium, and an unstable one.
+    seg = pj.Segment(0.5, 2e-4, 1e3, linear_density=0.2, extensible=False)
+    scene = pj.Scene(pj.Robot([seg]), pj.PolynomialCurvature(1), loads=[pj.Gravity()])
+    eq = pj.solve_equilibrium(scene, escapes=0, fallback=False)
+    assert bool(eq.converged) and not bool(eq.stable)
+    assert float(eq.min_hessian_eigenvalue) < 0
+    assert bool(eq.result == pj.RESULTS.converged_saddle) and not bool(eq.successful)
+    assert "unstable equilibrium" in eq.reason
+    # With its escapes (the default) the solve leaves the saddle for the buckled minimum.
+    buckled = pj.solve_equilibrium(scene, fallback=False)
+    assert bool(buckled.successful) and bool(buckled.stable), buckled.reason

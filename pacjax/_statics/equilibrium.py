@@ -40,7 +40,7 @@ from .._model.inputs import (
     static_load_sites,
 )
 from .._model.scene import Scene
-from .._results import from_code
+from .._results import CONVERGED_SADDLE, from_code
 from .continuation import conservative_part, retry_failed
 from .options import SolverOptions, resolve_options
 from .problem import ScaledProblem, flow_field
@@ -108,15 +108,19 @@ def equilibrium_from(
     """The :class:`Equilibrium` at the continuation's final iterate ``y`` and state."""
     residual_norm = max_abs(state.residual)
     converged = residual_norm <= tol
+    stable = state.eig > -solver.stability_tol
     energy = state.merit if scene.is_conservative else jnp.asarray(jnp.nan, state.merit.dtype)
+    # A stationary point that is not a minimum is not a success: a user who reads only the
+    # result must not take a physically impossible shape.
+    code = jnp.where(converged & ~stable, CONVERGED_SADDLE, final_code(state, converged))
     return Equilibrium(
         q=jax.lax.stop_gradient(problem.sigma) * y,
         converged=converged,
         residual_norm=residual_norm,
-        stable=state.eig > -solver.stability_tol,
+        stable=stable,
         min_hessian_eigenvalue=state.eig,
         steps=steps,
-        result=from_code(final_code(state, converged)),
+        result=from_code(code),
         energy=energy,
     )
 

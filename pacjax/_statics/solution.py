@@ -22,9 +22,9 @@ class Equilibrium(eqx.Module):
             conservative scene, the Hessian of ``V``), relative to the elastic stiffness (1 means
             as stiff as the body alone).
         steps: continuation steps plus Newton polish steps.
-        result: how the solve ended, a :class:`pacjax.RESULTS` item (``successful`` exactly
-            when ``converged``; see :attr:`reason`). A converged saddle is successful and not
-            ``stable``: check both.
+        result: how the solve ended, a :class:`pacjax.RESULTS` item (see :attr:`reason`):
+            ``successful`` exactly when ``converged`` and ``stable``; ``converged_saddle`` for
+            a converged unstable equilibrium (read ``converged`` for any stationary point).
         energy: potential energy (J) at ``q`` (NaN for scenes with non-conservative loads).
     """
 
@@ -39,7 +39,7 @@ class Equilibrium(eqx.Module):
 
     @property
     def successful(self) -> Bool[Array, "*batch"]:
-        """``result == RESULTS.successful`` (the residual fell below the tolerance)."""
+        """``result == RESULTS.successful``: converged to a stable equilibrium."""
         return self.result == RESULTS.successful
 
     @property
