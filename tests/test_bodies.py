@@ -326,6 +326,7 @@ def test_structured_hessian_with_mixed_models_is_the_autodiff_one(models):
     np.testing.assert_allclose(hess, reference[2], atol=1e-12)
 
 
+@pytest.mark.slow  # a batch and a single solve compiled per model pair: CI's slow step
 @pytest.mark.parametrize("models", MIXED, ids=["PAC+PCC", "Poly2+Poly1"])
 def test_batch_equals_single_solves_with_mixed_models(models):
     tendons = [pj.Tendon(1, angle=0.3, offset=0.01, routing="channel", mode="tension")]
@@ -463,6 +464,7 @@ def test_profile_is_checked():
         pj.Scene(pj.Robot([seg]), pj.PolynomialCurvature(2), quadrature_points=4)
 
 
+@pytest.mark.slow  # the implicit gradient and the solve compiled apart: CI's slow step
 def test_gradient_through_a_solve_with_respect_to_rest_curvature():
     seg = pj.Segment(0.15, 0.004, 500.0, linear_density=0.1, rest_curvature=[0.6, 0.2, 0.0, 0.0])
     scene = pj.Scene(pj.Robot([seg, seg]), pj.PolynomialCurvature(1), loads=[pj.Gravity()])
