@@ -120,7 +120,12 @@ def _csv(tmp_path, body, header="# sites = [[0, 1.0]]\n"):
     [
         ("# sites = [[0, 1.0]]\n", "u0,m0_x,m0_y,m0_z,extra\n0,0,0,0.1,1\n", "unknown column"),
         ("# sites = [[0, 1.0]]\n", "u0,m0_x,m0_y\n0,0,0\n", "missing marker column"),
-        ("# sites = [[0, 1.0]]\n", "m0_x,m0_y,m0_z\n0,0,0.1\n", "no control columns"),
+        ("# sites = [[0, 1.0]]\n", "u0,m0_x,m0_y,m0_z,base_qw\n0,0,0,0.1,1\n", "all of base_qw"),
+        (
+            "# sites = [[0, 1.0]]\n",
+            "u0,m0_x,m0_y,m0_z,base_qw,base_qx,base_qy,base_qz\n0,0,0,0.1,1,1,0,0\n",
+            "not a unit quaternion",
+        ),
         ("", "u0,m0_x,m0_y,m0_z\n0,0,0,0.1\n", "must give the marker sites"),
         ("# sites = [[0, 1.0]]\n", "u0,m0_x,m0_y,m0_z\n0,0,0,135.4\n", "millimetres"),
         ("# sites = [[0, 1.0]]\n", "u0,m0_x,m0_y,m0_z\n0,,,\n", "every marker position is NaN"),
@@ -249,3 +254,22 @@ def test_frames_that_did_not_converge_are_not_in_the_errors():
     json.dumps(summary, allow_nan=False)
     none = FitErrors.compute(predicted, measured, 1, np.zeros(3, bool), np.zeros((3, 4)))
     assert none.summary()["rmse_mm"] is None
+
+
+def test_robot_without_tendons_and_a_turned_base_round_trip(tmp_path):
+    angles = np.radians([0.0, 40.0, -75.0])
+    turns = np.stack(
+        [
+            [[np.cos(a), 0.0, np.sin(a)], [0.0, 1.0, 0.0], [-np.sin(a), 0.0, np.cos(a)]]
+            for a in angles
+        ]
+    )
+    d = pj.MocapDataset.from_arrays(
+        np.zeros((3, 0)), np.full((3, 1, 3), 0.1), ((0, 1.0),), base_rotation=turns
+    )
+    save_mocap(tmp_path / "cable.csv", d)
+    header = (tmp_path / "cable.csv").read_text().splitlines()[2]
+    assert not any(c.startswith("u") for c in header.split(",")) and "base_qw" in header
+    back = load_mocap(tmp_path / "cable.csv")
+    assert back.n_controls == 0
+    np.testing.assert_allclose(back.base_rotation, turns, atol=1e-12)

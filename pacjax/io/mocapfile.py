@@ -18,15 +18,18 @@ masked in that frame, the frame is kept)::
 
 Columns:
 
-- ``u0 .. u{n-1}`` (required): controls, one per tendon in the scene's order: pull-in (m) of a
-  length-mode tendon (0 = rest length, positive = shortened), or tension (N) of a tension-mode
-  tendon.
+- ``u0 .. u{n-1}`` (one per tendon; none for a robot without tendons): controls in the
+  scene's order: pull-in (m) of a length-mode tendon (0 = rest length, positive = shortened),
+  or tension (N) of a tension-mode tendon.
 - ``m{j}_x, m{j}_y, m{j}_z`` (required for each site j): marker position in the motion-capture
   frame. ``sites`` lists, per marker, ``[segment, s]`` or ``[segment, s, [ox, oy, oz]]``:
   segment index from 0 at the base, ``s`` in [0, 1] along it, and the marker's stand-off from
   the backbone in the local cross-section frame (m).
 - ``m{j}_qw, m{j}_qx, m{j}_qy, m{j}_qz`` (optional, all markers or none): orientation at site j
   as a unit quaternion (mocap frame; e.g. a rigid body at the tip).
+- ``base_qw, base_qx, base_qy, base_qz`` (optional, all four or none): the robot base's
+  orientation in that frame (base frame -> world, unit quaternion), for data taken with the
+  base turned from frame to frame.
 - ``payload_mass`` (optional): kg hanging at ``payload_site``.
 - ``force_x, force_y, force_z`` (optional): N at ``force_site``; world frame (the mocap frame's
   axes are not used: the force is in the scene's world frame) or, with ``force_follower``, the
@@ -156,6 +159,9 @@ def save_mocap(path, dataset: MocapDataset) -> None:
     if d.force is not None:
         columns += ["force_x", "force_y", "force_z"]
         blocks.append(d.force)
+    if d.base_rotation is not None:
+        columns += [f"base_q{a}" for a in "wxyz"]
+        blocks.append(matrix_to_quaternion(d.base_rotation))
     for j in range(d.n_markers):
         columns += [f"m{j}_{a}" for a in "xyz"]
     blocks.append(d.markers.reshape(d.n_frames, -1))
@@ -197,7 +203,7 @@ def load_mocap(path) -> MocapDataset:
     n_markers = len(header["sites"])
     table = _Columns(path, columns, data)
     n_u = _check_columns(path, table, n_markers)
-    controls = table.stack([f"u{i}" for i in range(n_u)])
+    controls = table.stack([f"u{i}" for i in range(n_u)]) if n_u else np.zeros((len(data), 0))
     if np.any(np.isnan(controls)):
         raise ValueError(f"{path}: controls (u columns) must not be empty or NaN")
     markers = (
@@ -206,6 +212,7 @@ def load_mocap(path) -> MocapDataset:
     payload = table.get("payload_mass") if "payload_mass" in table else None
     force = _read_force(path, table)
     orientations = _read_orientations(path, table, n_markers)
+    base_rotation = _read_base_rotation(path, table)
     try:
         return MocapDataset.from_arrays(
             controls,
@@ -218,6 +225,7 @@ def load_mocap(path) -> MocapDataset:
             force_follower=bool(header.get("force_follower", False)),
             orientations=orientations,
             time=table.get("time") if "time" in table else None,
+            base_rotation=base_rotation,
         )
     except ValueError as err:
         raise ValueError(f"{path}: {err}") from None
@@ -307,9 +315,8 @@ def _check_columns(path: str, table: _Columns, n_markers: int) -> int:
     n_u = 0
     while f"u{n_u}" in table:
         n_u += 1
-    if n_u == 0:
-        raise ValueError(f"{path}: no control columns (u0, u1, ...)")
     known = {"frame", "time", "payload_mass", "force_x", "force_y", "force_z"}
+    known |= {f"base_q{a}" for a in "wxyz"}
     known |= {f"u{i}" for i in range(n_u)}
     known |= {f"m{j}_{a}" for j in range(n_markers) for a in "xyz"}
     known |= {f"m{j}_q{a}" for j in range(n_markers) for a in "wxyz"}
@@ -334,6 +341,24 @@ def _read_force(path: str, table: _Columns) -> np.ndarray | None:
     if len(present) != 3:
         raise ValueError(f"{path}: force needs all of force_x, force_y, force_z")
     return table.stack(names)
+
+
+def _read_base_rotation(path: str, table: _Columns) -> np.ndarray | None:
+    """(frames, 3, 3) base rotations from ``base_q{w,x,y,z}`` (all four or none), else None."""
+    names = [f"base_q{a}" for a in "wxyz"]
+    present = [c for c in names if c in table]
+    if not present:
+        return None
+    if len(present) != 4:
+        raise ValueError(f"{path}: the base orientation needs all of {', '.join(names)}")
+    quats = table.stack(names)
+    norm = np.linalg.norm(quats, axis=1)
+    bad = ~np.isfinite(norm) | (np.abs(norm - 1.0) > 1e-3)
+    if bad.any():
+        raise ValueError(
+            f"{path}: base_q* of row {int(np.flatnonzero(bad)[0])} is not a unit quaternion"
+        )
+    return quaternion_to_matrix(quats / norm[:, None])
 
 
 def _read_orientations(path: str, table: _Columns, n_markers: int) -> np.ndarray | None:
