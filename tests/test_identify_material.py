@@ -244,3 +244,43 @@ def test_cable_on_a_turning_base_fitted_on_small_angles_predicts_the_others():
     assert np.all(np.abs(value - rest) < 3 * std), (value, std)
     # 1 mm per coordinate: a marker's distance error has an RMS of sqrt(3) mm.
     assert report.validation.rmse_mm < 1.5 * np.sqrt(3), report.validation.rmse_mm
+
+
+@pytest.mark.slow
+def test_a_gaussian_prior_pulls_the_fit_and_narrows_its_std(scaled_robot):
+    scene, data = scaled_robot
+    ei = float(scene.robot.segments[0].bending_stiffness)
+    _, free = pj.identify(scene, data, ("bending_stiffness",), progress=False)
+    _, tight = pj.identify(
+        scene,
+        data,
+        ("bending_stiffness",),
+        priors={"bending_stiffness": (1.2 * ei, 1e-4 * ei)},
+        progress=False,
+    )
+    _, loose = pj.identify(
+        scene,
+        data,
+        ("bending_stiffness",),
+        priors={"bending_stiffness": (1.2 * ei, 10 * ei)},
+        progress=False,
+    )
+    value = {
+        k: r.parameters["bending_stiffness"]["value"][0]
+        for k, r in (("free", free), ("tight", tight), ("loose", loose))
+    }
+    std = {
+        k: r.parameters["bending_stiffness"]["std"][0]
+        for k, r in (("free", free), ("tight", tight), ("loose", loose))
+    }
+    assert value["tight"] == pytest.approx(1.2 * ei, rel=1e-3)  # the prior dominates
+    assert value["loose"] == pytest.approx(value["free"], rel=1e-3)  # the data dominate
+    assert std["tight"] < 0.05 * std["free"]
+    with pytest.raises(ValueError, match="std > 0"):
+        pj.identify(
+            scene,
+            data,
+            ("bending_stiffness",),
+            priors={"bending_stiffness": (ei, 0.0)},
+            progress=False,
+        )

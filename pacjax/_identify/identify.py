@@ -45,6 +45,7 @@ from .problem import (
     STEP_SCALE,
     Evaluator,
     FrameData,
+    Prior,
     Problem,
     kabsch,
     make_blocks,
@@ -130,6 +131,7 @@ def identify(
     *,
     per_segment: Sequence[str] = (),
     bounds: dict | None = None,
+    priors: dict | None = None,
     validation: MocapDataset | None = None,
     holdout: float | Sequence[int] = 0.0,
     seed: int = 0,
@@ -169,6 +171,9 @@ def identify(
             [1e2, 1e12] Pa; rho in [1, 3e4] kg/m^3; rest curvature within +-4 pi; tendon
             offsets x0.1 to x10; marker offsets +-0.2 m from the start. No iterate leaves
             them; the report says which values end at one.
+        priors: name -> ``(mean, std)`` in the parameter's units (a number, or one per
+            fitted value): Gaussian priors, residual rows ``(value - mean) / std`` beside the
+            data's (the report's std then include them).
         validation: held-out frames (or ``holdout``: a random fraction of ``dataset``, or
             the 0-based indices of the frames to hold out).
         mocap_transform: starting ``(rotation, translation)``. Default: when fitted, the rigid
@@ -206,6 +211,8 @@ def identify(
         _deprecated.warn("identify(solver_options=...)", "identify(options=SolverOptions(...))")
         batch_options.update(solver_options)
     train = fit.evaluator(dataset, chunk, batch_options)
+    if priors:
+        train.prior = Prior(fit.problem, dict(priors))
     theta = np.zeros(fit.problem.n_theta)
     align = "mocap_transform" in params and mocap_transform is None
     fit, current, first_eval_s = _start(fit, train, theta, align)

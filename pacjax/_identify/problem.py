@@ -497,8 +497,9 @@ class FrameData:
 class Evaluator:
     """Batch equilibria (warm-started) and residual Jacobians of one dataset."""
 
-    def __init__(self, problem, data: FrameData, chunk: int, solver_options: dict):
+    def __init__(self, problem, data: FrameData, chunk: int, solver_options: dict, prior=None):
         self.problem, self.data, self.chunk, self.options = problem, data, chunk, solver_options
+        self.prior = prior
         self.count = 0
 
     def _solve(self, scene, q0):
@@ -554,7 +555,44 @@ class Evaluator:
         r = np.concatenate(rs) * valid[:, None]
         j = np.concatenate(js) * valid[:, None, None]
         pred, rpred = np.concatenate(preds)[: d.n], np.concatenate(rpreds)[: d.n]
-        return Evaluation(r, j, pred, rpred, q, valid)
+        prior = None if self.prior is None else self.prior(theta)
+        return Evaluation(r, j, pred, rpred, q, valid, prior)
+
+
+class Prior:
+    """Gaussian priors on fitted parameters as extra residual rows ``(value - mean) / std``
+    (physical units) with their Jacobian along the internal coordinates."""
+
+    def __init__(self, problem: Problem, priors: dict):
+        names = {b.name for b in problem.blocks}
+        unknown = sorted(set(priors) - names)
+        if unknown:
+            raise ValueError(f"priors names {unknown}, which are not fitted")
+        self.terms = []
+        for name, value in priors.items():
+            if not (isinstance(value, (tuple, list)) and len(value) == 2):
+                raise ValueError(f"priors[{name!r}] must be (mean, std), got {value!r}")
+            mean, std = (np.asarray(v, float) for v in value)
+            if not (np.all(np.isfinite(mean)) and np.all(std > 0)):
+                raise ValueError(f"priors[{name!r}]: mean must be finite and std > 0")
+            self.terms.append((name, jnp.asarray(mean), jnp.asarray(std)))
+        self.problem = problem
+        self._rows = jax.jit(jax.jacfwd(self.rows, has_aux=True))
+
+    def rows(self, theta):
+        p = self.problem
+        out = []
+        for block, init, th in zip(p.blocks, p.initial, p.split(theta), strict=True):
+            for name, mean, std in self.terms:
+                if name == block.name:
+                    value = jnp.ravel(p.physical(block, init, th))
+                    out.append(jnp.ravel((value - mean) / std))
+        r = jnp.concatenate(out)
+        return r, r
+
+    def __call__(self, theta) -> tuple[np.ndarray, np.ndarray]:
+        jac, r = self._rows(jnp.asarray(theta))
+        return np.asarray(r), np.asarray(jac)
 
 
 @dataclasses.dataclass
@@ -565,12 +603,18 @@ class Evaluation:
     rpred: np.ndarray
     q: np.ndarray
     valid: np.ndarray
+    prior: tuple | None = None  # Prior rows (r, J) at this point
 
     def cost(self, valid=None) -> float:
         v = self.valid if valid is None else valid
-        return 0.5 * float(np.sum(self.r[v] ** 2))
+        extra = 0.0 if self.prior is None else 0.5 * float(np.sum(self.prior[0] ** 2))
+        return 0.5 * float(np.sum(self.r[v] ** 2)) + extra
 
     def stacked(self) -> tuple[np.ndarray, np.ndarray]:
-        """Residuals (k,) and Jacobian (k, p) of the valid frames, stacked."""
+        """Residuals (k,) and Jacobian (k, p) of the valid frames, stacked (and the priors'
+        rows after them)."""
         r = self.r[self.valid].reshape(-1)
-        return r, self.j[self.valid].reshape(r.size, -1)
+        j = self.j[self.valid].reshape(r.size, -1)
+        if self.prior is None:
+            return r, j
+        return np.concatenate([r, self.prior[0]]), np.concatenate([j, self.prior[1]])
