@@ -7,6 +7,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from .. import _deprecated
+
 # Poisson's ratio of an incompressible elastomer: GJ = EI / (1 + nu) for a solid round section.
 _POISSON_RATIO = 0.5
 #: Default contraction limit of a segment, as a fraction of its rest length.
@@ -458,6 +460,14 @@ class Segment(eqx.Module):
         if self.profile is not None:
             return self.profile.density_at(s)
         return self._section_ratio(s, 2) if self.tapered else None
+
+    def section_scale(self, s: Float[Array, "*n"]) -> Float[Array, "*n"] | None:
+        """Deprecated: ``r(s) / r(0)`` of the outer radius (use :meth:`bending_profile` and
+        :meth:`area_profile`, which also hold a hollow section or a profile)."""
+        _deprecated.warn("Segment.section_scale", "Segment.bending_profile / area_profile")
+        if self.radius_tip is None:
+            return None
+        return self.radius_at(s) / self.radius
 
     def profile_degree(self) -> int:
         """Polynomial degree in ``s`` of :meth:`bending_profile` (0 when uniform)."""
