@@ -304,6 +304,7 @@ def _mixed_scene(models, tendons):
 MIXED = [(pj.PAC(), pj.PCC()), (pj.PolynomialCurvature(2), pj.PolynomialCurvature(1))]
 
 
+@pytest.mark.slow  # two compiled Hessians per model pair: CI's slow step
 @pytest.mark.parametrize("models", MIXED, ids=["PAC+PCC", "Poly2+Poly1"])
 def test_structured_hessian_with_mixed_models_is_the_autodiff_one(models):
     tendons = [
