@@ -153,20 +153,13 @@ def _put(scene: Scene, block: Block, value) -> Scene:
     return eqx.tree_at(where, scene, [value[k] for k in range(len(idx))])
 
 
-def section_moments(segment) -> tuple:
-    """``(I, A)``: the second moment (m^4) and area (m^2) of a segment's circular section at its
-    base, from ``radius`` and ``inner_radius``."""
-    outer, inner = segment.radius, segment.inner_radius
-    return 0.25 * jnp.pi * (outer**4 - inner**4), jnp.pi * (outer**2 - inner**2)
-
-
 def _put_material(scene: Scene, name: str, idx, value) -> Scene:
     """Young's modulus: EI = E I, and GJ and the axial stiffness in proportion (Poisson's ratio
     and the section kept); density: rho A = rho A."""
     segments = list(scene.robot.segments)
     for k, i in enumerate(idx):
         seg = segments[i]
-        second_moment, area = section_moments(seg)
+        second_moment, area = seg.base_section()
         if name == "density":
             segments[i] = eqx.tree_at(lambda x: x.linear_density, seg, value[k] * area)
             continue
@@ -381,7 +374,7 @@ def _material_value(segment, name: str, i: int) -> float:
             f"{name}: segment {i} has no section (Segment.radius = {float(segment.radius)} m); "
             "build it with Segment.from_material or give its radius"
         )
-    second_moment, area = section_moments(segment)
+    second_moment, area = segment.base_section()
     if name == "density":
         return float(segment.linear_density / area)
     return float(segment.bending_stiffness / second_moment)

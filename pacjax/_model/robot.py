@@ -341,7 +341,7 @@ class Segment(eqx.Module):
         i0 = as_float(inner_radius, "inner_radius")
         i1 = i0 if inner_radius_tip is None else as_float(inner_radius_tip, "inner_radius_tip")
         _check_section("Segment.from_material", r0, r1, i0, i1)
-        second_moment = 0.25 * jnp.pi * (r0**4 - i0**4)
+        second_moment, area = circular_section(r0, i0)
         bending = e * second_moment
         # A(s) = pi (r_o + r_i)(r_o - r_i), each factor linear in s: int_0^1 ds / A in closed
         # form (d/ds log(f / g) = (f' g - f g') / (f g), and f' g - f g' is constant).
@@ -357,7 +357,7 @@ class Segment(eqx.Module):
             bending_stiffness=bending,
             axial_stiffness=e / (as_float(length, "Segment.length") * inverse_area),
             torsion_stiffness=bending / (1.0 + as_float(poisson, "poisson")),
-            linear_density=as_float(density, "density") * jnp.pi * (r0**2 - i0**2),
+            linear_density=as_float(density, "density") * area,
             radius=r0,
             radius_tip=radius_tip,
             inner_radius=inner_radius,
@@ -426,6 +426,10 @@ class Segment(eqx.Module):
         if self.stiffening is not None and not isinstance(self.stiffening, StiffeningLaw):
             raise TypeError(f"Segment.stiffening must be a StiffeningLaw, got {self.stiffening!r}")
 
+    def base_section(self) -> tuple[Float[Array, ""], Float[Array, ""]]:
+        """:func:`circular_section` at the base (from ``radius`` and ``inner_radius``)."""
+        return circular_section(self.radius, self.inner_radius)
+
     @property
     def tapered(self) -> bool:
         """Whether the section varies along the segment."""
@@ -474,6 +478,12 @@ class Segment(eqx.Module):
         if self.profile is not None:
             return self.profile.degree
         return 4 if self.tapered else 0
+
+
+def circular_section(outer, inner) -> tuple[Float[Array, ""], Float[Array, ""]]:
+    """``(I, A)``: second moment of area (m^4) and area (m^2) of a solid (``inner = 0``) or
+    hollow circle."""
+    return 0.25 * jnp.pi * (outer**4 - inner**4), jnp.pi * (outer**2 - inner**2)
 
 
 def _check_section(owner: str, r0, r1, i0, i1) -> None:
