@@ -1,6 +1,8 @@
 """Identification of material values and rest curvature (issue 26's bodies, fitted): a tapered
 two-segment tendon robot made from known E, rho and rest curvature, 1 mm noise, started 2x off."""
 
+import json
+
 import equinox as eqx
 import numpy as np
 import pytest
@@ -284,3 +286,52 @@ def test_a_gaussian_prior_pulls_the_fit_and_narrows_its_std(scaled_robot):
             priors={"bending_stiffness": (ei, 0.0)},
             progress=False,
         )
+
+
+@pytest.mark.slow
+def test_cli_fits_a_robot_without_tendons_on_a_turning_base(tmp_path):
+    from click.testing import CliRunner
+
+    from pacjax.cli.main import cli
+    from pacjax.io.mocapfile import save_mocap
+    from pacjax.io.scenefile import save_scene
+
+    ei = 2.5e-3
+    seg = pj.Segment(0.4, ei, 1e3, linear_density=0.08, extensible=False)
+    scene = pj.Scene(
+        pj.Robot([seg]),
+        pj.PolynomialCurvature(1),
+        loads=[pj.Gravity()],
+        markers=[(0, 0.5), (0, 1.0)],
+    )
+    angles = np.radians(np.arange(-60.0, 61.0, 15.0))
+    data, _ = pj.synthetic_mocap(
+        scene,
+        np.zeros((angles.size, 0)),
+        base_rotation=np.stack([_about_y(a) for a in angles]),
+        exact=True,
+        noise=0.0,
+        transform=None,
+    )
+    save_mocap(tmp_path / "cable.csv", data)
+    start = eqx.tree_at(lambda s: s.robot.segments[0].bending_stiffness, scene, 2 * ei)
+    save_scene(tmp_path / "cable.toml", start, name="cable")
+    result = CliRunner().invoke(
+        cli,
+        [
+            "fit",
+            str(tmp_path / "cable.toml"),
+            str(tmp_path / "cable.csv"),
+            "--params",
+            "bending_stiffness",
+            "--holdout",
+            "0",
+            "--no-plot",
+            "--out",
+            str(tmp_path / "out"),
+        ],
+        catch_exceptions=False,
+    )
+    assert result.exit_code == 0, result.output
+    report = json.loads((tmp_path / "out" / "cable_fit.json").read_text())
+    assert report["parameters"]["bending_stiffness"]["value"][0] == pytest.approx(ei, rel=1e-6)
