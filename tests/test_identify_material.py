@@ -197,27 +197,39 @@ def _about_y(angle):
     return turn @ pj.presets.MOUNTS["hanging"]
 
 
+def _turning_cable(ei, markers, angles_deg, noise, rest=None, loads=(), seed=0):
+    """An inextensible cable (0.4 m, PolynomialCurvature(1), gravity and ``loads``) and its
+    synthetic frames with the base turned about world y to each of ``angles_deg``."""
+    seg = pj.Segment(0.4, ei, 1e3, linear_density=0.08, rest_curvature=rest, extensible=False)
+    scene = pj.Scene(
+        pj.Robot([seg]), pj.PolynomialCurvature(1), loads=[pj.Gravity(), *loads], markers=markers
+    )
+    angles = np.radians(np.asarray(angles_deg, float))
+    data, _ = pj.synthetic_mocap(
+        scene,
+        np.zeros((angles.size, 0)),
+        base_rotation=np.stack([_about_y(a) for a in angles]),
+        exact=True,
+        noise=noise,
+        transform=None,
+        seed=seed,
+    )
+    return scene, data, angles
+
+
 @pytest.mark.slow
 def test_cable_on_a_turning_base_fitted_on_small_angles_predicts_the_others():
     """A pre-curved cable (one segment, distributed and end mass) clamped at a base turned
     through +-165 degrees: EI and rest curvature from the poses within 60 degrees of hanging,
     the others predicted."""
     ei, rest = 2.5e-3, [1.2, -0.4, 0.0, 0.0]
-    seg = pj.Segment(0.4, ei, 1e3, linear_density=0.08, rest_curvature=rest, extensible=False)
-    scene = pj.Scene(
-        pj.Robot([seg]),
-        pj.PolynomialCurvature(1),
-        loads=[pj.Gravity(), pj.PointMass(0.01, 0)],
-        markers=[(0, 0.2), (0, 0.4), (0, 0.6), (0, 0.8), (0, 1.0)],
-    )
-    angles = np.radians(np.arange(-165.0, 166.0, 7.5))
-    data, _ = pj.synthetic_mocap(
-        scene,
-        np.zeros((angles.size, 0)),
-        base_rotation=np.stack([_about_y(a) for a in angles]),
-        exact=True,
+    scene, data, angles = _turning_cable(
+        ei,
+        [(0, 0.2), (0, 0.4), (0, 0.6), (0, 0.8), (0, 1.0)],
+        np.arange(-165.0, 166.0, 7.5),
         noise=1e-3,
-        transform=None,
+        rest=rest,
+        loads=[pj.PointMass(0.01, 0)],
         seed=11,
     )
     near = np.flatnonzero(np.abs(angles) <= np.radians(60.0) + 1e-9)
@@ -297,21 +309,8 @@ def test_cli_fits_a_robot_without_tendons_on_a_turning_base(tmp_path):
     from pacjax.io.scenefile import save_scene
 
     ei = 2.5e-3
-    seg = pj.Segment(0.4, ei, 1e3, linear_density=0.08, extensible=False)
-    scene = pj.Scene(
-        pj.Robot([seg]),
-        pj.PolynomialCurvature(1),
-        loads=[pj.Gravity()],
-        markers=[(0, 0.5), (0, 1.0)],
-    )
-    angles = np.radians(np.arange(-60.0, 61.0, 15.0))
-    data, _ = pj.synthetic_mocap(
-        scene,
-        np.zeros((angles.size, 0)),
-        base_rotation=np.stack([_about_y(a) for a in angles]),
-        exact=True,
-        noise=0.0,
-        transform=None,
+    scene, data, _ = _turning_cable(
+        ei, [(0, 0.5), (0, 1.0)], np.arange(-60.0, 61.0, 15.0), noise=0.0
     )
     save_mocap(tmp_path / "cable.csv", data)
     start = eqx.tree_at(lambda s: s.robot.segments[0].bending_stiffness, scene, 2 * ei)
