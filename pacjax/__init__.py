@@ -37,6 +37,7 @@ _PUBLIC = {
     "static_frames": "._identify.dataset",
     "identify": "._identify.identify",
     "IdentificationReport": "._identify.report",
+    "Branches": "._identify.branches",
     "high_fidelity": "._identify.synthetic",
     "synthetic_mocap": "._identify.synthetic",
     "astype": "._model.query",

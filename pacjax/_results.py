@@ -37,6 +37,10 @@ class RESULTS(eqx.Enumeration):
         "tolerance but the stiffness is not positive definite, and no escape along its "
         "negative curvature left it); `converged` is True, `stable` False"
     )
+    branch_mismatch = (
+        "frames left the data's equilibrium branch: another stable equilibrium fits their "
+        "markers better, or every trial step takes them over a fold onto another branch"
+    )
 
 
 _ITEM = jtu.tree_structure(RESULTS.successful)

@@ -520,3 +520,18 @@ def test_inverse_statics_and_dynamics_with_mixed_models_and_an_inextensible_segm
     assert traj.q.shape[-1] == scene.n_dofs == 6
     assert np.all(np.isfinite(np.asarray(traj.q)))
     np.testing.assert_array_equal(scene.coordinates(traj.q[-1])[1, [1, 3]], 0.0)  # c1, dL pinned
+
+
+def test_random_starts_draw_only_the_free_coordinates():
+    """find_equilibria's starts on scenes with pinned coordinates (an inextensible segment, a
+    lower-order segment) have the scene's own number of coordinates."""
+    from pacjax._statics.multistart import random_starts
+
+    rigid = pj.Segment(0.3, 1e-3, 1e3, extensible=False)
+    for scene in (
+        pj.Scene(pj.Robot([rigid]), pj.PCC()),
+        pj.Scene(pj.Robot([rigid, rigid]), [pj.PolynomialCurvature(2), pj.PCC()]),
+    ):
+        starts = random_starts(scene, 5, 0, 1.0, True)
+        assert starts.shape == (5, scene.n_dofs)
+        assert np.all(starts[0] == 0.0) and np.any(starts[1:] != 0.0)

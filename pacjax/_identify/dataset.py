@@ -76,6 +76,39 @@ def _base_rotations(value, n_frames: int) -> np.ndarray:
     return r
 
 
+def _gravity_directions(value, n_frames: int) -> np.ndarray:
+    """(frames, 3) unit vectors, or a ValueError naming ``gravity_direction``."""
+    g = _array("gravity_direction", value, (n_frames, 3))
+    bad = np.abs(np.linalg.norm(g, axis=1) - 1.0) > 1e-6
+    if bad.any():
+        raise ValueError(
+            f"gravity_direction[{int(np.flatnonzero(bad)[0])}] is not a unit vector "
+            f"(norm {np.linalg.norm(g[bad][0]):.6g})"
+        )
+    return g
+
+
+def _frame_values(value, n_frames: int) -> dict:
+    """``{name: (frames, ...) array}``, or a ValueError naming the entry."""
+    if not isinstance(value, dict) or not value:
+        raise ValueError("frame_values must be a non-empty dict of name -> (frames, ...) array")
+    out = {}
+    for name, x in value.items():
+        a = _array(f"frame_values[{name!r}]", x, (n_frames,) + (None,) * (np.ndim(x) - 1))
+        if a.ndim == 0:
+            raise ValueError(f"frame_values[{name!r}] must have a leading frame axis")
+        out[str(name)] = a
+    return out
+
+
+def _holdout_mask(value, n_frames: int) -> np.ndarray:
+    """(frames,) bool from 0/1 or booleans, or a ValueError naming ``holdout``."""
+    a = _array("holdout", value, (n_frames,))
+    if not np.all((a == 0) | (a == 1)):
+        raise ValueError("holdout must be 0 or 1 (or False/True) in every frame")
+    return a.astype(bool)
+
+
 class MocapDataset(eqx.Module):
     """Static frames of a motion-capture session (build with :meth:`from_arrays`).
 
@@ -95,6 +128,13 @@ class MocapDataset(eqx.Module):
         base_rotation: (frames, 3, 3) the robot's base orientation (base frame -> world) in
             each frame, for data taken with the base turned from frame to frame (the scene's
             own ``Robot.base_rotation`` is then replaced), or None.
+        gravity_direction: (frames, 3) unit vector of gravity (world frame) in each frame (the
+            scene's :class:`pacjax.Gravity` direction is then replaced), or None.
+        frame_values: ``{name: (frames, ...) array}`` of any other per-frame quantity, put
+            into the scene by the ``frame_update`` hook of :func:`pacjax.identify` (and
+            :func:`pacjax.synthetic_mocap`), or None.
+        holdout: (frames,) True for a frame to hold out of a fit (the CSV's ``holdout``
+            column), or None.
     """
 
     controls: np.ndarray
@@ -108,6 +148,9 @@ class MocapDataset(eqx.Module):
     orientations: np.ndarray | None = None
     time: np.ndarray | None = None
     base_rotation: np.ndarray | None = None
+    gravity_direction: np.ndarray | None = None
+    frame_values: dict | None = None
+    holdout: np.ndarray | None = None
 
     @classmethod
     def from_arrays(
@@ -124,6 +167,9 @@ class MocapDataset(eqx.Module):
         orientations=None,
         time=None,
         base_rotation=None,
+        gravity_direction=None,
+        frame_values=None,
+        holdout=None,
     ) -> MocapDataset:
         """Validate and wrap arrays (SI units: m, kg, N; see the class attributes).
 
@@ -147,6 +193,12 @@ class MocapDataset(eqx.Module):
             time = _array("time", time, (n_frames,))
         if base_rotation is not None:
             base_rotation = _base_rotations(base_rotation, n_frames)
+        if gravity_direction is not None:
+            gravity_direction = _gravity_directions(gravity_direction, n_frames)
+        if frame_values is not None:
+            frame_values = _frame_values(frame_values, n_frames)
+        if holdout is not None:
+            holdout = _holdout_mask(holdout, n_frames)
         return cls(
             controls=controls,
             markers=markers,
@@ -159,6 +211,9 @@ class MocapDataset(eqx.Module):
             orientations=orientations,
             time=time,
             base_rotation=base_rotation,
+            gravity_direction=gravity_direction,
+            frame_values=frame_values,
+            holdout=holdout,
         )
 
     # ------------------------------------------------------------------------- structure
@@ -204,6 +259,13 @@ class MocapDataset(eqx.Module):
             orientations=pick(self.orientations),
             time=pick(self.time),
             base_rotation=pick(self.base_rotation),
+            gravity_direction=pick(self.gravity_direction),
+            frame_values=(
+                None
+                if self.frame_values is None
+                else {k: v[index] for k, v in self.frame_values.items()}
+            ),
+            holdout=pick(self.holdout),
         )
         if out.n_frames == 0:
             raise IndexError(f"selection {index!r} holds no frames")
@@ -241,7 +303,8 @@ class MocapDataset(eqx.Module):
         return self[np.flatnonzero(~held)], self[np.flatnonzero(held)]
 
     def conditions(self) -> np.ndarray:
-        """(frames, k) the inputs of each frame: controls, payload, force."""
+        """(frames, k) the inputs of each frame: controls, payload, force, base and gravity
+        directions, frame values."""
         cols = [self.controls]
         if self.payload_mass is not None:
             cols.append(self.payload_mass[:, None])
@@ -249,6 +312,10 @@ class MocapDataset(eqx.Module):
             cols.append(self.force)
         if self.base_rotation is not None:
             cols.append(self.base_rotation.reshape(self.n_frames, 9))
+        if self.gravity_direction is not None:
+            cols.append(self.gravity_direction)
+        for value in (self.frame_values or {}).values():
+            cols.append(value.reshape(self.n_frames, -1))
         return np.concatenate(cols, axis=1)
 
     @classmethod

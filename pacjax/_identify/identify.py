@@ -36,9 +36,11 @@ from .._model.frameloads import with_frame_loads
 from .._model.inputs import check_scene
 from .._model.scene import Scene
 from .._model.sites import normalise_sites
+from .._results import RESULTS
 from .._statics.options import SolverOptions, resolve_options
+from .branches import Branches, BranchTracker
 from .dataset import MocapDataset
-from .optimise import optimise
+from .optimise import History, optimise
 from .problem import (
     L2_DELTA,
     PARAMETERS,
@@ -47,6 +49,7 @@ from .problem import (
     FrameData,
     Prior,
     Problem,
+    check_params,
     kabsch,
     make_blocks,
     theta_bounds,
@@ -95,6 +98,9 @@ def _check_data(
     chosen = np.iterable(holdout) and not isinstance(holdout, (str, bytes))
     if validation is not None and (chosen or holdout):
         raise ValueError("give either validation= or holdout=, not both")
+    if validation is None and not (chosen or holdout) and dataset.holdout is not None:
+        if dataset.holdout.any():
+            holdout, chosen = np.flatnonzero(dataset.holdout).tolist(), True
     if chosen or holdout:
         dataset, validation = dataset.split(holdout, seed)
     if validation is not None:
@@ -143,6 +149,10 @@ def identify(
     optimizer="levenberg-marquardt",
     max_iterations: int = 50,
     tol: float = 1e-10,
+    branch_starts: int = 8,
+    n_starts: int = 1,
+    stages: Sequence[Sequence[str]] | None = None,
+    frame_update=None,
     chunk_size: int = 16,
     progress: bool | None = None,
     options: SolverOptions | None = None,
@@ -175,7 +185,8 @@ def identify(
             fitted value): Gaussian priors, residual rows ``(value - mean) / std`` beside the
             data's (the report's std then include them).
         validation: held-out frames (or ``holdout``: a random fraction of ``dataset``, or
-            the 0-based indices of the frames to hold out).
+            the 0-based indices of the frames to hold out; default: the frames the dataset's
+            own ``holdout`` marks, the CSV's ``holdout`` column).
         mocap_transform: starting ``(rotation, translation)``. Default: when fitted, the rigid
             alignment (Kabsch) of the starting model's markers to the data; otherwise the
             identity (the data are in the scene's world frame).
@@ -187,6 +198,25 @@ def identify(
         max_iterations: iteration limit.
         tol: stop when the relative decrease of the loss falls below ``tol`` (or, for
             Levenberg-Marquardt, the step in the internal coordinates below ``sqrt(tol)``).
+        branch_starts: scattered starts from which every frame is solved again at the fit's
+            start and whenever it stops: a frame whose markers another stable equilibrium fits
+            clearly better (RMSE below 80 % of its own and 3 ``noise`` lower) is moved to it
+            and the fit resumes (at most :data:`MAX_ROUNDS` times). 0 turns the checks off.
+            Steps on which a frame jumps to another branch (its markers move further than the
+            step's linearisation predicts plus 2 % of the robot's length) are rejected either
+            way. See :class:`pacjax.Branches`.
+        n_starts: fits from this many starting points, the best kept (lowest loss among the
+            successful): the given values, then every positive parameter's factor drawn
+            log-uniformly within x1/4..x4 of them (inside the bounds), the others as given.
+        stages: parameter groups fitted one after the other, each stage starting from the
+            last stage's values (e.g. ``[["bending_stiffness"], ["bending_stiffness",
+            "linear_density"]]``); replaces ``params``. ``per_segment``, ``bounds`` and
+            ``priors`` apply in the stages that fit the parameters they name. The report is
+            the last stage's, with every stage's summary in ``report.stages``.
+        frame_update: ``(scene, values) -> scene``, the hook that puts one frame's
+            ``dataset.frame_values`` (traced arrays) into the scene: any per-frame change the
+            dataset's loads, base and gravity directions do not cover (see
+            :mod:`pacjax._model.frameloads`). It runs under ``vmap``: jax.numpy only.
         chunk_size: frames per compiled batch (every dataset is padded to whole chunks, so
             train and held-out frames share one compilation).
         progress: show a tqdm progress bar (default: when stderr is a terminal).
@@ -202,9 +232,43 @@ def identify(
     t_start = time.perf_counter()
     dataset, validation = _check_data(scene, dataset, validation, holdout, seed)
     _check_settings(loss, noise, orientation_noise, huber_delta, max_iterations, optimizer)
+    n_starts = _check_count("n_starts", n_starts, 1)
+    branch_starts = _check_count("branch_starts", branch_starts, 0)
+    if stages is not None:
+        settings = dict(
+            per_segment=per_segment,
+            bounds=bounds,
+            priors=priors,
+            validation=validation,
+            mocap_transform=mocap_transform,
+            noise=noise,
+            orientation_noise=orientation_noise,
+            loss=loss,
+            huber_delta=huber_delta,
+            optimizer=optimizer,
+            max_iterations=max_iterations,
+            tol=tol,
+            branch_starts=branch_starts,
+            n_starts=n_starts,
+            seed=seed,
+            frame_update=frame_update,
+            chunk_size=chunk_size,
+            progress=progress,
+            options=options,
+            solver_options=solver_options,
+        )
+        return _staged(scene, dataset, stages, settings, t_start)
     scales = (noise, orientation_noise, huber_delta if loss == "huber" else None)
     fit = _build_problem(
-        scene, dataset, validation, params, per_segment, mocap_transform, scales, bounds
+        scene,
+        dataset,
+        validation,
+        params,
+        per_segment,
+        mocap_transform,
+        scales,
+        bounds,
+        frame_update,
     )
     chunk, batch_options = _batch_settings(chunk_size, options)
     if solver_options is not None:
@@ -213,22 +277,25 @@ def identify(
     train = fit.evaluator(dataset, chunk, batch_options)
     if priors:
         train.prior = Prior(fit.problem, dict(priors))
-    theta = np.zeros(fit.problem.n_theta)
     align = "mocap_transform" in params and mocap_transform is None
-    fit, current, first_eval_s = _start(fit, train, theta, align)
-    theta, current, history, stop = optimise(
-        train,
-        theta,
-        current,
-        optimizer,
-        max_iterations,
-        tol,
-        progress,
-        fit.n_observations,
-        fit.dataset.markers,
-        fit.bounds,
-    )
-    return _report(fit, train, theta, current, history, stop, t_start, first_eval_s)
+    fit, current, first_eval_s = _start(fit, train, np.zeros(fit.problem.n_theta), align)
+    settings = _Settings(optimizer, max_iterations, tol, progress, branch_starts, seed)
+    runs = []
+    for k, theta in enumerate(_starting_points(fit, n_starts, seed)):
+        start = current if k == 0 else train(theta)
+        if k and not start.valid[: fit.dataset.n_frames].any():
+            continue  # no frame has an equilibrium at this start: nothing to descend from
+        runs.append(_descend(fit, train, theta, start, settings))
+    best = min(runs, key=lambda run: (not run.successful, run.current.cost()))
+    return _report(fit, train, best, runs, t_start, first_eval_s)
+
+
+def _check_count(name: str, value, minimum: int) -> int:
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+        raise TypeError(f"{name} must be an integer, got {value!r}")
+    if value < minimum:
+        raise ValueError(f"{name} must be >= {minimum}, got {value}")
+    return int(value)
 
 
 # ------------------------------------------------------------------------------ the problem
@@ -269,15 +336,23 @@ class _Fit:
 
 
 def _build_problem(
-    scene: Scene, dataset, validation, params, per_segment, mocap_transform, scales, bounds=None
+    scene: Scene,
+    dataset,
+    validation,
+    params,
+    per_segment,
+    mocap_transform,
+    scales,
+    bounds=None,
+    frame_update=None,
 ) -> _Fit:
     """The parameter blocks, frame loads, starting transform and residual scales ``(noise,
     orientation_noise, huber_delta or None for the quadratic loss)`` of a fit on ``dataset``;
     raises where ``validation`` carries other kinds of data."""
     fit_scene, blocks, initial, labels = make_blocks(scene, params, per_segment, dataset.n_markers)
-    loaded, frame_loads = with_frame_loads(fit_scene, dataset)
+    loaded, frame_loads = with_frame_loads(fit_scene, dataset, frame_update)
     if validation is not None:
-        _check_validation_kinds(fit_scene, dataset, validation)
+        _check_validation_kinds(fit_scene, dataset, validation, frame_update)
     rot0, trans0 = _starting_transform(mocap_transform)
     noise, orientation_noise, huber_delta = scales
     sites = dataset.sites
@@ -303,15 +378,14 @@ def _build_problem(
     return _Fit(fit_scene, dataset, validation, problem, labels, rot0, trans0, float(noise), bounds)
 
 
-def _check_validation_kinds(fit_scene: Scene, dataset, validation) -> None:
+def _check_validation_kinds(fit_scene: Scene, dataset, validation, frame_update) -> None:
     """Raise unless ``validation`` carries the loads and orientations ``dataset`` does."""
-    with_frame_loads(fit_scene, validation)  # same checks
-    if any(
-        (getattr(validation, k) is None) != (getattr(dataset, k) is None)
-        for k in ("payload_mass", "force", "base_rotation")
-    ):
+    with_frame_loads(fit_scene, validation, frame_update)  # same checks
+    kinds = ("payload_mass", "force", "base_rotation", "gravity_direction", "frame_values")
+    if any((getattr(validation, k) is None) != (getattr(dataset, k) is None) for k in kinds):
         raise ValueError(
-            "validation must carry the same kinds of loads (and base orientations) as dataset"
+            "validation must carry the same kinds of per-frame data (loads, base and gravity "
+            "directions, frame values) as dataset"
         )
     if dataset.orientations is not None and validation.orientations is None:
         raise ValueError("dataset has orientations but validation does not")
@@ -362,9 +436,102 @@ def _start(fit: _Fit, train: Evaluator, theta, align: bool):
     return fit, current, first_eval_s
 
 
-def _report(fit: _Fit, train, theta, current, history, stop, t_start, first_eval_s):
-    """The fitted scene and the :class:`IdentificationReport` of the optimum ``theta``."""
+#: Descents after which frames still moving to better-fitting branches end a fit.
+MAX_ROUNDS = 4
+
+
+@dataclasses.dataclass(frozen=True)
+class _Settings:
+    """How one descent runs."""
+
+    optimizer: object
+    max_iterations: int
+    tol: float
+    progress: bool | None
+    branch_starts: int
+    seed: int
+
+
+@dataclasses.dataclass
+class _Run:
+    """One descent: its optimum, evaluation, history, stop and the frames' branches."""
+
+    theta: np.ndarray
+    current: object
+    history: History
+    stop: tuple  # (iterations, result, message)
+    branches: Branches
+
+    @property
+    def successful(self) -> bool:
+        return bool(self.stop[1] == RESULTS.successful)
+
+
+def _starting_points(fit: _Fit, n_starts: int, seed: int) -> list[np.ndarray]:
+    """The internal coordinates of each start: the given values, then random factors within
+    x1/4..x4 on every positive parameter (clipped to the bounds)."""
+    rng = np.random.default_rng(seed)
+    log = np.concatenate([np.full(b.size, b.log) for b in fit.problem.blocks])
+    points = [np.zeros(fit.problem.n_theta)]
+    for _ in range(n_starts - 1):
+        theta = np.where(log, rng.uniform(-np.log(4.0), np.log(4.0), log.size), 0.0)
+        points.append(np.clip(theta, *fit.bounds))
+    return points
+
+
+def _descend(fit: _Fit, train: Evaluator, theta, current, settings: _Settings) -> _Run:
+    """Optimiser descents from ``theta`` on the data's branches: a branch check first, and
+    after every descent that stops short of the iteration limit; a check that moves frames
+    starts another descent."""
+    n = fit.dataset.n_frames
+    tracker = BranchTracker(
+        fit.problem.scene, fit.dataset.markers, fit.noise, settings.branch_starts, settings.seed
+    )
+    history = History(
+        current,
+        fit.n_observations,
+        fit.dataset.markers,
+        settings.max_iterations,
+        settings.progress,
+    )
+    current, moved = tracker.check(train, theta, current)
+    if moved.any():
+        history.restart(current)
+    iterations = 0
+    for _ in range(MAX_ROUNDS):
+        theta, current, (its, result, message) = optimise(
+            train,
+            theta,
+            current,
+            settings.optimizer,
+            settings.max_iterations - iterations,
+            settings.tol,
+            history,
+            fit.bounds,
+            tracker,
+        )
+        iterations += its
+        if bool(result == RESULTS.max_steps_reached):
+            break
+        current, moved = tracker.check(train, theta, current)
+        if not moved.any():
+            break
+        history.restart(current)
+    else:
+        tracker.branches.off_branch = moved[:n]
+        result = RESULTS.branch_mismatch
+        message = (
+            f"stopped: frames {np.flatnonzero(moved).tolist()} still fit better on another "
+            f"equilibrium branch after {MAX_ROUNDS} descents"
+        )
+    history.bar.close()
+    return _Run(theta, current, history, (iterations, result, message), tracker.branches)
+
+
+def _report(fit: _Fit, train, best: _Run, runs: list, t_start, first_eval_s):
+    """The fitted scene and the :class:`IdentificationReport` of the best descent."""
     problem = fit.problem
+    theta, current = best.theta, best.current
     cov, std_theta = _covariance(current, fit.n_observations, problem.n_theta)
     fitted, rot, trans, offsets = problem.apply(jnp.asarray(theta))
     parameters, names, identifiable = _parameter_table(fit, theta, std_theta, trans)
@@ -375,11 +542,11 @@ def _report(fit: _Fit, train, theta, current, history, stop, t_start, first_eval
         held = fit.evaluator(fit.validation, train.chunk, train.options)
         errors_val = _fit_errors(held(theta), fit.validation, tip, fit.orient)
     out_scene = _fitted_scene(fitted, fit.scene, fit.dataset.sites, offsets)
-    (losses, rmse), (iterations, result, message) = history, stop
+    iterations, result, message = best.stop
     report = IdentificationReport(
         parameters=parameters,
-        loss_history=losses,
-        rmse_history_mm=rmse,
+        loss_history=best.history.losses,
+        rmse_history_mm=best.history.rmse,
         train=errors_train,
         validation=errors_val,
         rotation=np.asarray(rot),
@@ -394,8 +561,67 @@ def _report(fit: _Fit, train, theta, current, history, stop, t_start, first_eval
         time_s=time.perf_counter() - t_start,
         first_evaluation_s=first_eval_s,
         noise=fit.noise,
+        branches=best.branches,
+        starts=[_run_summary(run, fit.n_observations) for run in runs] if len(runs) > 1 else None,
     )
     return out_scene, report
+
+
+def _run_summary(run: _Run, n_obs: int) -> dict:
+    iterations, _, message = run.stop
+    return {
+        "loss": run.current.cost() / n_obs,
+        "rmse_mm": run.history.rmse[-1],
+        "iterations": iterations,
+        "message": message,
+    }
+
+
+def _staged(scene: Scene, dataset: MocapDataset, stages, settings: dict, t_start: float):
+    """Fits of each stage's parameters in turn, each from the last one's values."""
+    stages = [list(stage) for stage in stages]
+    if not stages or not all(stages):
+        raise ValueError("stages must be a non-empty list of non-empty parameter lists")
+    for k, params in enumerate(stages):  # every stage's names before the first fit
+        try:
+            per = [p for p in settings["per_segment"] if p in params]
+            check_params(params, per)
+        except ValueError as err:
+            raise ValueError(f"stages[{k}]: {err}") from None
+    summaries, losses, rmse, evaluations = [], [], [], 0
+    for params in stages:
+        fitted = set(params)
+        stage = dict(settings)
+        stage["per_segment"] = [p for p in settings["per_segment"] if p in fitted]
+        for key in ("bounds", "priors"):
+            given = settings[key] or {}
+            stage[key] = {p: v for p, v in given.items() if p in fitted} or None
+        scene, report = identify(scene, dataset, params, **stage)
+        if "mocap_transform" in fitted:
+            settings["mocap_transform"] = (report.rotation, report.translation)
+        if "marker_offsets" in fitted:
+            dataset = dataclasses.replace(dataset, sites=scene.markers)
+        summaries.append(
+            {
+                "params": params,
+                "loss": report.loss_history[-1],
+                "rmse_mm": report.rmse_history_mm[-1],
+                "iterations": report.iterations,
+                "message": report.message,
+            }
+        )
+        losses += report.loss_history
+        rmse += report.rmse_history_mm
+        evaluations += report.evaluations
+    report = dataclasses.replace(
+        report,
+        loss_history=losses,
+        rmse_history_mm=rmse,
+        evaluations=evaluations,
+        stages=summaries,
+        time_s=time.perf_counter() - t_start,
+    )
+    return scene, report
 
 
 #: A direction of the internal coordinates whose singular value, with every Jacobian column

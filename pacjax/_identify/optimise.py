@@ -7,27 +7,23 @@ import optax
 from .._results import RESULTS
 
 
-def optimise(
-    train, theta, current, optimizer, max_iterations, tol, progress, n_obs, markers, bounds
-):
+def optimise(train, theta, current, optimizer, max_iterations, tol, history, bounds, tracker):
     """Levenberg-Marquardt (or optax) iterations from ``theta`` within ``bounds = (lower,
     upper)`` of the internal coordinates (every iterate stays inside them exactly); each trial
-    point's equilibria are warm-started from the current ones. Returns the optimum, its
-    evaluation, the loss and RMSE histories and ``(iterations, result, message)``."""
-    history = _History(current, n_obs, markers, max_iterations, progress)
+    point's equilibria are warm-started from the current ones, and a trial on which a frame
+    jumps to another branch (``tracker``, a :class:`BranchTracker`) is rejected. Returns the
+    optimum, its evaluation and ``(iterations, result, message)``; ``history`` records every
+    accepted step."""
     if isinstance(optimizer, str):
-        theta, current, stop = _levenberg_marquardt(
-            train, theta, current, max_iterations, tol, history, bounds
+        return _levenberg_marquardt(
+            train, theta, current, max_iterations, tol, history, bounds, tracker
         )
-    else:
-        theta, current, stop = _optax_descent(
-            train, theta, current, optimizer, max_iterations, tol, history, bounds
-        )
-    history.bar.close()
-    return theta, current, (history.losses, history.rmse), stop
+    return _optax_descent(
+        train, theta, current, optimizer, max_iterations, tol, history, bounds, tracker
+    )
 
 
-class _History:
+class History:
     """Loss and training RMSE after every accepted iteration, and the progress bar."""
 
     def __init__(self, current, n_obs: int, markers, max_iterations: int, progress):
@@ -51,8 +47,15 @@ class _History:
         self.bar.update()
         self.bar.set_postfix_str(f"RMSE {self.rmse[-1]:.3f} mm")
 
+    def restart(self, current) -> None:
+        """Record the evaluation after frames moved to other branches (not a step)."""
+        self.losses.append(current.cost() / self.n_obs)
+        self.rmse.append(_rmse_mm(current.pred, self.markers))
 
-def _levenberg_marquardt(train, theta, current, max_iterations, tol, history: _History, bounds):
+
+def _levenberg_marquardt(
+    train, theta, current, max_iterations, tol, history: History, bounds, tracker
+):
     """The Levenberg-Marquardt loop; returns ``(theta, evaluation, (iterations, result,
     message))``."""
     result, message = RESULTS.max_steps_reached, "iteration limit reached"
@@ -66,6 +69,8 @@ def _levenberg_marquardt(train, theta, current, max_iterations, tol, history: _H
             break
         trial = train(theta + step, q0=current.q)
         ok = bool(np.all(trial.valid[current.valid]))
+        jumped = tracker.jumped(current, trial, step) if ok else None
+        ok = ok and not jumped.any()
         actual = current.cost() - trial.cost(current.valid) if ok else -np.inf
         if lm.update(actual / predicted, np.max(np.abs(step)), ok):
             decrease = actual / max(current.cost(), 1e-300)
@@ -79,18 +84,29 @@ def _levenberg_marquardt(train, theta, current, max_iterations, tol, history: _H
                 )
                 break
         elif lm.rejected >= LevenbergMarquardt.MAX_REJECTED:
-            result = RESULTS.successful if ok else RESULTS.no_equilibrium
-            message = (
-                "converged (no step reduces the loss further: at the solver's accuracy)"
-                if ok
-                else "stopped: equilibria fail to converge along every trial step"
-            )
+            result, message = _rejected(ok, jumped)
             break
     return theta, current, (iterations, result, message)
 
 
+def _rejected(ok: bool, jumped) -> tuple:
+    """The result and message of a fit whose last trial steps were all rejected."""
+    if ok:
+        return (
+            RESULTS.successful,
+            "converged (no step reduces the loss further: at the solver's accuracy)",
+        )
+    if jumped is not None:
+        return (
+            RESULTS.branch_mismatch,
+            f"stopped: frames {np.flatnonzero(jumped).tolist()} jump to another equilibrium "
+            "branch along every trial step (the branch they follow ends at a fold)",
+        )
+    return RESULTS.no_equilibrium, "stopped: equilibria fail to converge along every trial step"
+
+
 def _optax_descent(
-    train, theta, current, optimizer, max_iterations, tol, history: _History, bounds
+    train, theta, current, optimizer, max_iterations, tol, history: History, bounds, tracker
 ):
     """An optax optimiser driven with the gradient ``J^T r``, each iterate projected onto the
     bounds; returns ``(theta, evaluation, (iterations, result, message))``."""
@@ -107,6 +123,14 @@ def _optax_descent(
         if not np.all(trial.valid[current.valid]):
             result = RESULTS.no_equilibrium
             message = "stopped: a frame failed to converge along the optax path"
+            break
+        jumped = tracker.jumped(current, trial, new_theta - theta)
+        if jumped.any():
+            result = RESULTS.branch_mismatch
+            message = (
+                f"stopped: frames {np.flatnonzero(jumped).tolist()} jumped to another "
+                "equilibrium branch along the optax path"
+            )
             break
         previous = current.cost()
         theta, current = new_theta, trial

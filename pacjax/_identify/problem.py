@@ -211,14 +211,21 @@ def _frame_jacobian(problem, theta, q, controls, row, meas, mask, rmeas, rmask):
         return scene.residual(q_, controls)
 
     def residual(th, q_):
-        out = _frame_residual(problem, th, q_, controls, row, meas, mask, rmeas, rmask)
-        return out[0], out
+        r, pred, rpred = _frame_residual(problem, th, q_, controls, row, meas, mask, rmeas, rmask)
+        return (r, pred), (r, pred, rpred)
 
     # Along both arguments in one forward pass: one traced copy of each residual, not two.
-    (d_theta, d_q), (r, pred, rpred) = jax.jacfwd(residual, (0, 1), has_aux=True)(theta, q)
+    jac, (r, pred, rpred) = jax.jacfwd(residual, (0, 1), has_aux=True)(theta, q)
     forcing, stiffness = jax.jacfwd(equilibrium_residual, (0, 1))(theta, q)
     dq = -jnp.linalg.solve(stiffness, forcing)  # implicit function theorem
-    return r, d_theta + jnp.matmul(d_q, dq, precision=MATMUL_PRECISION), pred, rpred
+
+    def total(d):  # d/dtheta along the equilibrium
+        d_theta, d_q = d
+        return d_theta + jnp.tensordot(d_q, dq, 1, precision=MATMUL_PRECISION)
+
+    # The markers' derivative too: a step's predicted marker motion, against which a frame's
+    # actual motion tells a jump to another equilibrium branch.
+    return r, total(jac[0]), pred, rpred, total(jac[1])
 
 
 @jit
@@ -233,7 +240,7 @@ def _evaluate(problem, theta, q, controls, rows, meas, mask, rmeas, rmask):
 # ------------------------------------------------------------------------------ set-up
 def make_blocks(scene: Scene, params, per_segment, n_markers) -> tuple[Scene, list, list, list]:
     """Blocks, starting values and labels; adds zero stiffening laws where they are fitted."""
-    params = _check_params(params, per_segment)
+    params = check_params(params, per_segment)
     if "stiffening" in params:
         scene = _with_stiffening_laws(scene)
     if "rest_curvature" in params:
@@ -247,7 +254,7 @@ def make_blocks(scene: Scene, params, per_segment, n_markers) -> tuple[Scene, li
     return scene, blocks, initial, labels
 
 
-def _check_params(params, per_segment) -> tuple:
+def check_params(params, per_segment) -> tuple:
     """``params`` as a tuple of known, distinct names; ``per_segment`` a subset of them that
     are segment or tendon parameters."""
     if isinstance(params, str):
@@ -477,7 +484,7 @@ class FrameData:
         mask = np.concatenate([mask, np.zeros((total - n,) + mask.shape[1:])])
         meas = pad(np.nan_to_num(dataset.markers))
         rows = frame_loads.rows(dataset)
-        rows = None if rows is None else {k: pad(v) for k, v in rows.items()}
+        rows = None if rows is None else jax.tree.map(pad, rows)
         rmeas = rmask = None
         if orient:
             ori = dataset.orientations
@@ -510,11 +517,14 @@ class Evaluator:
         q = np.array(eq.q)
         return q, np.asarray(eq.converged) & np.asarray(eq.stable) & np.all(np.isfinite(q), 1)
 
-    def __call__(self, theta, q0=None):
+    def __call__(self, theta, q0=None, retry: bool = True):
+        """The frames' equilibria at ``theta`` from ``q0`` (default: the rest configuration),
+        their residuals and Jacobians. With ``retry``, rows that fail from ``q0`` start again
+        from the straight configuration."""
         p, d = self.problem, self.data
         scene = p.apply(jnp.asarray(theta))[0]
         q, ok = self._solve(scene, q0)
-        if q0 is not None and not ok.all():
+        if retry and q0 is not None and not ok.all():
             # A warm start next to an equilibrium can stall at round-off (the energy cannot
             # decrease further); those rows start again from the straight configuration (the
             # same batch shape: no recompilation).
@@ -522,12 +532,16 @@ class Evaluator:
             better = ok_retry & ~ok
             q[better], ok = q_retry[better], ok | ok_retry
         q_safe = np.where(ok[:, None], q, 0.0)
-        rs, js, preds, rpreds = [], [], [], []
+        rs, js, preds, rpreds, dpreds = [], [], [], [], []
         for start in range(0, len(q), self.chunk):
             sl = slice(start, start + self.chunk)
             pick = lambda x, sl=sl: None if x is None else jnp.asarray(x[sl])  # noqa: E731
-            rows = None if d.rows is None else {k: jnp.asarray(v[sl]) for k, v in d.rows.items()}
-            r, j, pred, rpred = _evaluate(
+            rows = (
+                None
+                if d.rows is None
+                else jax.tree.map(lambda v, sl=sl: jnp.asarray(v[sl]), d.rows)
+            )
+            r, j, pred, rpred, dpred = _evaluate(
                 p,
                 jnp.asarray(theta),
                 pick(q_safe),
@@ -542,14 +556,16 @@ class Evaluator:
             js.append(np.asarray(j))
             preds.append(np.asarray(pred))
             rpreds.append(np.asarray(rpred))
+            dpreds.append(np.asarray(dpred))
         self.count += 1
         valid = ok.copy()
         valid[d.n :] = False
         r = np.concatenate(rs) * valid[:, None]
         j = np.concatenate(js) * valid[:, None, None]
         pred, rpred = np.concatenate(preds)[: d.n], np.concatenate(rpreds)[: d.n]
+        dpred = np.concatenate(dpreds)[: d.n]
         prior = None if self.prior is None else self.prior(theta)
-        return Evaluation(r, j, pred, rpred, q, valid, prior)
+        return Evaluation(r, j, pred, rpred, q, valid, dpred, prior)
 
 
 class Prior:
@@ -596,6 +612,7 @@ class Evaluation:
     rpred: np.ndarray
     q: np.ndarray
     valid: np.ndarray
+    dpred: np.ndarray  # (frames, m, 3, p): d pred / d theta along the equilibria
     prior: tuple | None = None  # Prior rows (r, J) at this point
 
     def cost(self, valid=None) -> float:

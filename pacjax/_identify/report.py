@@ -10,6 +10,7 @@ import numpy as np
 
 from .. import _deprecated
 from .._results import RESULTS
+from .branches import Branches
 
 
 @dataclasses.dataclass
@@ -138,6 +139,13 @@ class IdentificationReport:
         time_s: wall time of the fit; first_evaluation_s: the first batch evaluation,
             compilation included.
         noise: the residual scale (m) used.
+        branches: the equilibrium branch of each training frame (:class:`pacjax.Branches`):
+            frames moved to a branch that fits them better, frames still off the data's
+            branch, alternatives found, steps rejected for a jump.
+        starts: with ``n_starts > 1``, one summary per descent (final loss, RMSE, iterations,
+            message); the report is the best one's. None otherwise.
+        stages: with ``stages``, one summary per stage (its parameters, final loss, RMSE,
+            iterations, message); the report is the last stage's, its histories span all.
     """
 
     parameters: dict
@@ -157,6 +165,9 @@ class IdentificationReport:
     time_s: float
     first_evaluation_s: float
     noise: float
+    branches: Branches | None = None
+    starts: list | None = None
+    stages: list | None = None
 
     @property
     def correlations(self) -> np.ndarray:
@@ -209,6 +220,9 @@ class IdentificationReport:
             "time_s": self.time_s,
             "first_evaluation_s": self.first_evaluation_s,
             "noise_m": self.noise,
+            "branches": None if self.branches is None else self.branches.summary(),
+            "starts": self.starts,
+            "stages": self.stages,
         }
 
     def to_json(self, path) -> None:
@@ -269,6 +283,7 @@ class IdentificationReport:
         if strong:
             pairs = ", ".join(f"{a} & {b} ({r:+.2f})" for a, b, r in strong)
             lines += ["", f"Strongly correlated (|r| > 0.9): {pairs}."]
+        lines += self._branch_lines()
         lines += ["", "## Errors (mm; markers in the mocap frame)", ""]
         lines.append(
             "| frames | n | not converged | RMSE | mean | max | tip mean | orientation mean (deg) |"
@@ -293,10 +308,46 @@ class IdentificationReport:
                 "Per-marker RMSE (mm), held-out: "
                 + ", ".join(_fmt(v) for v in self.validation.marker_rmse_mm)
             )
+        for title, runs in (("Starts", self.starts), ("Stages", self.stages)):
+            if runs:
+                lines += ["", f"## {title}", ""]
+                for k, run in enumerate(runs):
+                    params = f" ({', '.join(run['params'])})" if "params" in run else ""
+                    lines.append(
+                        f"- {k}{params}: loss {run['loss']:.6g}, RMSE {run['rmse_mm']:.3f} mm, "
+                        f"{run['iterations']} iterations; {run['message']}"
+                    )
         lines += ["", "## Loss history", "", "iteration, loss, train RMSE (mm):", ""]
         for k, (loss, rmse) in enumerate(zip(self.loss_history, self.rmse_history_mm, strict=True)):
             lines.append(f"- {k}: {loss:.6g}, {rmse:.4f}")
         return "\n".join(lines) + "\n"
+
+    def _branch_lines(self) -> list[str]:
+        b = self.branches
+        if b is None:
+            return []
+        if not b.starts:
+            text = "not checked (branch_starts=0)"
+        else:
+            text = (
+                f"each frame solved again from {b.starts} scattered starts at the start and "
+                f"end of every descent; {int(np.sum(b.alternatives > 0))} frame(s) have "
+                "another stable equilibrium"
+            )
+        lines = ["", "## Equilibrium branches", "", text + "."]
+        if b.switched.any():
+            lines.append(
+                f"Moved to a branch that fits the data better: frames "
+                f"{np.flatnonzero(b.switched).tolist()}."
+            )
+        if b.off_branch.any():
+            lines.append(
+                f"Still better fitted on another branch at the end: frames "
+                f"{np.flatnonzero(b.off_branch).tolist()}."
+            )
+        if b.jumps:
+            lines.append(f"{b.jumps} step(s) rejected: a frame jumped to another branch.")
+        return lines
 
 
 def _fmt(v) -> str:

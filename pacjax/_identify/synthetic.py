@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 import warnings
 
+import jax
 import numpy as np
 
 from .._model.frameloads import with_frame_loads
@@ -190,6 +191,9 @@ def synthetic_mocap(
     force_site=None,
     force_follower: bool = False,
     base_rotation=None,
+    gravity_direction=None,
+    frame_values=None,
+    frame_update=None,
     noise: float = 1e-3,
     dropout: float = 0.0,
     transform="random",
@@ -208,8 +212,11 @@ def synthetic_mocap(
         scene: the robot with the true parameters.
         controls: (frames, n_tendons) commands.
         sites: marker sites (default: the scene's markers).
-        payload_mass, payload_site, force, force_site, force_follower, base_rotation:
-            per-frame loads and base orientations, as in :meth:`MocapDataset.from_arrays`.
+        payload_mass, payload_site, force, force_site, force_follower, base_rotation,
+        gravity_direction, frame_values: per-frame loads, base and gravity directions and
+            other values, as in :meth:`MocapDataset.from_arrays`.
+        frame_update: the hook that puts ``frame_values`` into the scene (as in
+            :func:`pacjax.identify`).
         noise: standard deviation (m) of the Gaussian noise on each marker coordinate.
         dropout: probability that a marker is missing in a frame (NaN).
         transform: ``"random"`` (uniform random rotation, translation within 1 m), None
@@ -234,6 +241,8 @@ def synthetic_mocap(
         force_site=force_site,
         force_follower=force_follower,
         base_rotation=base_rotation,
+        gravity_direction=gravity_direction,
+        frame_values=frame_values,
     )
     truth_scene = _with_markers(scene, sites)
     if not exact:
@@ -241,7 +250,7 @@ def synthetic_mocap(
             truth_scene, model=model, subdivisions=subdivisions, stiffening_rate=stiffening_rate
         )
     loaded, q, ok, frames = _truth_equilibria(
-        scene, truth_scene, template, controls, solver_options
+        scene, truth_scene, template, controls, frame_update, solver_options
     )
     world, rots = _site_poses(frames, truth_scene.markers, q)
     rotation, translation = _mocap_transform(transform, rng)
@@ -269,10 +278,14 @@ def _check_request(scene: Scene, controls, sites, noise, dropout):
     return controls, sites
 
 
-def _truth_equilibria(scene: Scene, truth_scene: Scene, template, controls, solver_options):
+def _truth_equilibria(
+    scene: Scene, truth_scene: Scene, template, controls, frame_update, solver_options
+):
     """The truth's equilibria of every frame: ``(the truth with the frame loads, q of the
     frames that converged to a stable equilibrium, the mask of those frames)``."""
-    loaded, frame_loads = with_frame_loads(truth_scene, _remap_sites(template, scene, truth_scene))
+    loaded, frame_loads = with_frame_loads(
+        truth_scene, _remap_sites(template, scene, truth_scene), frame_update
+    )
     rows = frame_loads.rows(template)
     eq = solve_batch(
         loaded,
@@ -290,7 +303,7 @@ def _truth_equilibria(scene: Scene, truth_scene: Scene, template, controls, solv
         )
     # Each kept frame's scene (its loads and base orientation), for the marker poses.
     frames = [
-        loaded if rows is None else frame_loads(loaded, {k: v[i] for k, v in rows.items()})
+        loaded if rows is None else frame_loads(loaded, jax.tree.map(lambda v, i=i: v[i], rows))
         for i in np.flatnonzero(ok)
     ]
     return loaded, np.asarray(eq.q)[ok], ok, frames
@@ -348,17 +361,20 @@ def _measured_orientations(rotation, rots, orientation_noise, rng) -> np.ndarray
 
 def _kept_frames(template: MocapDataset, keep, measured, orientations) -> MocapDataset:
     """The dataset of the frames ``keep``: the template's controls and loads, the measurements."""
+    kept = template[keep]
     return MocapDataset.from_arrays(
-        template.controls[keep],
+        kept.controls,
         measured,
-        template.sites,
-        None if template.payload_mass is None else template.payload_mass[keep],
-        payload_site=template.payload_site,
-        force=None if template.force is None else template.force[keep],
-        force_site=template.force_site,
-        force_follower=template.force_follower,
+        kept.sites,
+        kept.payload_mass,
+        payload_site=kept.payload_site,
+        force=kept.force,
+        force_site=kept.force_site,
+        force_follower=kept.force_follower,
         orientations=orientations,
-        base_rotation=None if template.base_rotation is None else template.base_rotation[keep],
+        base_rotation=kept.base_rotation,
+        gravity_direction=kept.gravity_direction,
+        frame_values=kept.frame_values,
     )
 
 

@@ -99,13 +99,14 @@ def random_starts(scene: Scene, n_starts: int, seed: int, spread: float, straigh
 
     Strain coordinates are uniform in ``[-spread, spread]`` (rad per segment), bending-plane
     angles (PAC/PCC ``phi``) uniform in ``[-pi, pi]``, elongations zero. With ``straight`` the
-    first start is the straight configuration.
+    first start is the straight configuration. Coordinates a scene pins (an inextensible
+    segment's ``dL``, a lower-order segment's missing coefficients) are not drawn.
     """
     rng = np.random.default_rng(seed)
     names = scene.model.coordinate_names()
     half_width = np.array([np.pi if n == "phi" else (0.0 if n == "dL" else spread) for n in names])
     unit = rng.uniform(-1.0, 1.0, size=(n_starts, scene.n_segments, len(names)))
-    starts = (unit * half_width).reshape(n_starts, scene.n_dofs)
+    starts = np.array(scene.free_part(unit * half_width))
     if straight:
         starts[0] = 0.0
     return starts

@@ -35,12 +35,35 @@ def _names(text: str) -> tuple[str, ...]:
     default=0.2,
     show_default=True,
     type=click.FloatRange(0.0, 0.9),
-    help="Fraction of frames held out for validation (0: none).",
+    help="Fraction of frames held out for validation (0: none; default: the CSV's holdout "
+    "column where it has one, else 0.2).",
 )
 @click.option(
     "--holdout-frames",
     default="",
     help="Comma-separated 0-based frame numbers to hold out (instead of --holdout).",
+)
+@click.option(
+    "--stages",
+    default="",
+    help="Parameter groups fitted in turn, ';' between stages, e.g. "
+    "'bending_stiffness;bending_stiffness,linear_density' (instead of --params).",
+)
+@click.option(
+    "--starts",
+    default=1,
+    show_default=True,
+    type=click.IntRange(min=1),
+    help="Fits from this many starting points (the scene's values, then random factors "
+    "x1/4..x4); the best is kept.",
+)
+@click.option(
+    "--branch-starts",
+    default=8,
+    show_default=True,
+    type=click.IntRange(min=0),
+    help="Scattered starts that check each frame is on the equilibrium branch that fits it "
+    "best (0: no checks).",
 )
 @click.option("--loss", type=click.Choice(["l2", "huber"]), default="l2", show_default=True)
 @click.option("--noise", default=1e-3, show_default=True, help="Marker noise scale, m.")
@@ -61,6 +84,9 @@ def fit(
     per_segment,
     holdout,
     holdout_frames,
+    stages,
+    starts,
+    branch_starts,
     loss,
     noise,
     max_iterations,
@@ -88,8 +114,12 @@ def fit(
                 f"--holdout-frames must be comma-separated frame numbers, got {holdout_frames!r}"
             ) from None
     _reject_motive_export(data_file)
+    source = click.get_current_context().get_parameter_source("holdout")
     try:
         data = load_mocap(data_file)
+        if data.holdout is not None and not holdout_frames:
+            if source == click.core.ParameterSource.DEFAULT:
+                holdout = 0.0  # identify holds out the frames the column marks
         fitted, report = pj.identify(
             scene,
             data,
@@ -100,6 +130,9 @@ def fit(
             loss=loss,
             noise=noise,
             max_iterations=max_iterations,
+            n_starts=starts,
+            branch_starts=branch_starts,
+            stages=[_names(stage) for stage in stages.split(";")] if stages else None,
             options=solver_options(extra),
         )
     except (ValueError, TypeError) as err:
@@ -177,6 +210,12 @@ def _echo_fit(name: str, report) -> None:
         failed = int((~errors.converged).sum())
         note = f", {failed} not converged: not in the RMSE" if failed else ""
         click.echo(f"{label} RMSE {errors.rmse_mm:.3f} mm ({len(errors.q)} frames{note})")
+    branches = report.branches
+    if branches is not None and branches.switched.any():
+        click.echo(
+            f"frames {np.flatnonzero(branches.switched).tolist()} moved to the equilibrium "
+            "branch that fits them better"
+        )
 
 
 # ------------------------------------------------------------------------------ inverse

@@ -30,6 +30,10 @@ Columns:
 - ``base_qw, base_qx, base_qy, base_qz`` (optional, all four or none): the robot base's
   orientation in that frame (base frame -> world, unit quaternion), for data taken with the
   base turned from frame to frame.
+- ``gravity_x, gravity_y, gravity_z`` (optional, all three or none): the unit direction of
+  gravity (world frame) in that frame, replacing the scene's ``Gravity`` direction.
+- ``holdout`` (optional): 1 for a frame that ``pacjax fit`` holds out of the fit and reports
+  as held-out, 0 otherwise.
 - ``payload_mass`` (optional): kg hanging at ``payload_site``.
 - ``force_x, force_y, force_z`` (optional): N at ``force_site``; world frame (the mocap frame's
   axes are not used: the force is in the scene's world frame) or, with ``force_follower``, the
@@ -162,6 +166,12 @@ def save_mocap(path, dataset: MocapDataset) -> None:
     if d.base_rotation is not None:
         columns += [f"base_q{a}" for a in "wxyz"]
         blocks.append(matrix_to_quaternion(d.base_rotation))
+    if d.gravity_direction is not None:
+        columns += [f"gravity_{a}" for a in "xyz"]
+        blocks.append(d.gravity_direction)
+    if d.holdout is not None:
+        columns.append("holdout")
+        blocks.append(d.holdout[:, None].astype(float))
     for j in range(d.n_markers):
         columns += [f"m{j}_{a}" for a in "xyz"]
     blocks.append(d.markers.reshape(d.n_frames, -1))
@@ -213,6 +223,13 @@ def load_mocap(path) -> MocapDataset:
     force = _read_force(path, table)
     orientations = _read_orientations(path, table, n_markers)
     base_rotation = _read_base_rotation(path, table)
+    gravity = _read_triple(path, table, "gravity", "the gravity direction")
+    if gravity is not None:
+        norm = np.linalg.norm(gravity, axis=1, keepdims=True)
+        if not np.all(np.abs(norm - 1.0) < 1e-3):
+            bad = int(np.flatnonzero(np.abs(norm[:, 0] - 1.0) >= 1e-3)[0])
+            raise ValueError(f"{path}: gravity_x/y/z of row {bad} is not a unit vector")
+        gravity = gravity / norm
     try:
         return MocapDataset.from_arrays(
             controls,
@@ -226,6 +243,8 @@ def load_mocap(path) -> MocapDataset:
             orientations=orientations,
             time=table.get("time") if "time" in table else None,
             base_rotation=base_rotation,
+            gravity_direction=gravity,
+            holdout=table.get("holdout") if "holdout" in table else None,
         )
     except ValueError as err:
         raise ValueError(f"{path}: {err}") from None
@@ -316,7 +335,7 @@ def _check_columns(path: str, table: _Columns, n_markers: int) -> int:
     while f"u{n_u}" in table:
         n_u += 1
     known = {"frame", "time", "payload_mass", "force_x", "force_y", "force_z"}
-    known |= {f"base_q{a}" for a in "wxyz"}
+    known |= {f"base_q{a}" for a in "wxyz"} | {f"gravity_{a}" for a in "xyz"} | {"holdout"}
     known |= {f"u{i}" for i in range(n_u)}
     known |= {f"m{j}_{a}" for j in range(n_markers) for a in "xyz"}
     known |= {f"m{j}_q{a}" for j in range(n_markers) for a in "wxyz"}
@@ -334,12 +353,17 @@ def _check_columns(path: str, table: _Columns, n_markers: int) -> int:
 
 def _read_force(path: str, table: _Columns) -> np.ndarray | None:
     """(frames, 3) N from ``force_x, force_y, force_z`` (all three or none), else None."""
-    names = ("force_x", "force_y", "force_z")
+    return _read_triple(path, table, "force", "force")
+
+
+def _read_triple(path: str, table: _Columns, prefix: str, what: str) -> np.ndarray | None:
+    """(frames, 3) from ``{prefix}_x, _y, _z`` (all three or none), else None."""
+    names = tuple(f"{prefix}_{a}" for a in "xyz")
     present = [c for c in names if c in table]
     if not present:
         return None
     if len(present) != 3:
-        raise ValueError(f"{path}: force needs all of force_x, force_y, force_z")
+        raise ValueError(f"{path}: {what} needs all of {', '.join(names)}")
     return table.stack(names)
 
 
