@@ -88,3 +88,22 @@ def test_bad_arguments_are_rejected_before_solving(column, found):
         pj.find_equilibria(column.robot)
     with pytest.raises(IndexError):
         found[5]
+
+
+def test_the_default_starts_find_the_curled_loop_of_a_hanging_cable():
+    """A hanging cable with a tip mass, curled by a tendon at 1-3 N, has a mild bend and a
+    loop curled through more than a turn. With one spread of 1 rad even 170 starts found only
+    the bend; the default spreads (0.5 rad to 2 pi) find both from 16."""
+    seg = pj.Segment(0.3, 9e-4, 1e3, linear_density=1e-3, extensible=False)
+    cable = pj.Scene(
+        pj.Robot([seg], base_rotation=pj.presets.MOUNTS["hanging"]),
+        pj.PCC(),
+        tendons=[pj.Tendon(0, 0.0, 0.01, mode="tension", routing="channel")],
+        loads=[pj.Gravity(), pj.PointMass(0.05, 0)],
+    )
+    for tension in (1.0, 2.0, 3.0):
+        found = pj.find_equilibria(cable, [tension])
+        bends = np.abs(np.asarray(found.q)[np.asarray(found.stable), 0])
+        assert np.any(bends < 1.0) and np.any((bends > 7.0) & (bends < 8.5)), bends
+    narrow = pj.find_equilibria(cable, [2.0], n_starts=170, spread=1.0)
+    assert np.all(np.abs(np.asarray(narrow.q)[np.asarray(narrow.stable), 0]) < 1.0)

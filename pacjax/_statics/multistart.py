@@ -94,17 +94,28 @@ class Equilibria(eqx.Module):
         return "\n".join(lines)
 
 
-def random_starts(scene: Scene, n_starts: int, seed: int, spread: float, straight: bool):
+#: Default spreads of :func:`find_equilibria`'s starts (rad per segment): geometric from
+#: near-straight, where a buckled column's minima are, to a full turn, where a hanging body's
+#: curled branches are. With one spread of 1 rad, 170 starts missed the curled loop of a hanging
+#: tendon-curled cable that 16 starts at pi found (``tests/test_multistart.py``).
+SPREADS = (0.5, 2.0 * np.pi)
+
+
+def random_starts(scene: Scene, n_starts: int, seed: int, spread, straight: bool):
     """Starting configurations ``(n_starts, n_dofs)``.
 
-    Strain coordinates are uniform in ``[-spread, spread]`` (rad per segment), bending-plane
-    angles (PAC/PCC ``phi``) uniform in ``[-pi, pi]``, elongations zero. With ``straight`` the
-    first start is the straight configuration. Coordinates a scene pins (an inextensible
-    segment's ``dL``, a lower-order segment's missing coefficients) are not drawn.
+    Strain coordinates are uniform in ``[-spread, spread]`` (rad per segment; ``spread`` a
+    number, or one per start), bending-plane angles (PAC/PCC ``phi``) uniform in ``[-pi, pi]``,
+    elongations zero. With ``straight`` the first start is the straight configuration.
+    Coordinates a scene pins (an inextensible segment's ``dL``, a lower-order segment's missing
+    coefficients) are not drawn.
     """
     rng = np.random.default_rng(seed)
     names = scene.model.coordinate_names()
-    half_width = np.array([np.pi if n == "phi" else (0.0 if n == "dL" else spread) for n in names])
+    strain = np.array([n not in ("phi", "dL") for n in names], float)
+    angle = np.array([n == "phi" for n in names], float)
+    spread = np.broadcast_to(np.asarray(spread, float), (n_starts,))[:, None, None]
+    half_width = spread * strain + np.pi * angle
     unit = rng.uniform(-1.0, 1.0, size=(n_starts, scene.n_segments, len(names)))
     starts = np.array(scene.free_part(unit * half_width))
     if straight:
@@ -141,7 +152,7 @@ def find_equilibria(
     *,
     n_starts: int = 16,
     seed: int = 0,
-    spread: float = 1.0,
+    spread: float | None = None,
     include_straight: bool = True,
     distance_tol: float | None = None,
     escapes: int = 0,
@@ -155,7 +166,11 @@ def find_equilibria(
         n_starts: number of starts, the straight one included.
         seed: seed of the random starts.
         spread: half-width (rad per segment) of the uniform distribution of the starting
-            strain coordinates; bending-plane angles are drawn in ``[-pi, pi]``.
+            strain coordinates; bending-plane angles are drawn in ``[-pi, pi]``. Default: one
+            per start, geometric from 0.5 rad to 2 pi (:data:`SPREADS`), so that both the
+            shapes near straight and the curled branches of a hanging body are sampled.
+            Every start is one row of one batch solve: the cost is that of
+            :func:`pacjax.solve_batch` on ``n_starts`` rows.
         include_straight: make the first start the straight configuration (the one that lands
             on the straight saddle of a buckled column).
         distance_tol: two solutions are one equilibrium when frames along the robot are within
@@ -173,15 +188,17 @@ def find_equilibria(
     check_scene(scene)
     n_starts = _check_int("n_starts", n_starts, 1)
     seed = _check_int("seed", seed, 0)
-    if isinstance(spread, bool) or not np.isscalar(spread) or not np.isfinite(spread):
+    if spread is None:
+        spread = np.geomspace(*SPREADS, n_starts)
+    elif isinstance(spread, bool) or not np.isscalar(spread) or not np.isfinite(spread):
         raise ValueError(f"spread must be a finite number > 0, got {spread!r}")
-    if spread <= 0:
+    elif spread <= 0:
         raise ValueError(f"spread must be a finite number > 0, got {spread!r}")
     if distance_tol is not None and not (np.isscalar(distance_tol) and distance_tol > 0):
         raise ValueError(f"distance_tol must be a number > 0, got {distance_tol!r}")
     controls = np.asarray(check_controls(scene, controls, solver_dtype(scene)))
     options.setdefault("fallback", False)
-    starts = random_starts(scene, n_starts, seed, float(spread), include_straight)
+    starts = random_starts(scene, n_starts, seed, spread, include_straight)
     batch = solve_batch(scene, np.tile(controls, (n_starts, 1)), starts, escapes=escapes, **options)
 
     converged = np.flatnonzero(np.asarray(batch.converged))
