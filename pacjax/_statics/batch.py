@@ -94,8 +94,8 @@ def iter_batch(
         raise TypeError(f"chunk_size must be an integer, got {chunk_size!r}")
     if chunk_size < 1:
         raise ValueError(f"chunk_size must be >= 1, got {chunk_size}")
-    opts = resolve_options(options, **overrides)
     dtype = solver_dtype(scene)
+    opts = resolve_options(options, dtype, **overrides)
     scene = static_load_sites(as_traced_leaves(scene, dtype))
     controls_batch = np.asarray(check_controls(scene, controls_batch, dtype, batched=True))
     n = controls_batch.shape[0]

@@ -217,7 +217,7 @@ def solve_equilibrium(
         controls (implicit function theorem); ``jit``/``vmap`` compatible.
     """
     check_scene(scene)
-    opts = resolve_options(options, **overrides)
+    opts = resolve_options(options, solver_dtype(scene), **overrides)
     scene, controls, q0 = _prepared(scene, controls, q0)
     eq, sag = _solve_checked(scene, controls, q0, opts)
     if opts.method == "ptc" and not _is_traced(eq.converged) and not bool(eq.converged):

@@ -8,6 +8,11 @@ import numpy as np
 
 from .._chord import kvaerno5
 
+#: Default tolerance on the scaled residual per precision. Float32's round-off (~1e-7
+#: relative) keeps its residual above 1e-10: with the float64 default, float32 solves ran to
+#: their step limit at residuals of 1e-5 to 1e-9 (``tests/test_campaign.py``).
+DEFAULT_TOL = {"float64": 1e-10, "float32": 1e-4}
+
 
 class SolverOptions(eqx.Module):
     """Settings of the equilibrium solver, taken by every solve: :func:`pacjax.solve_equilibrium`,
@@ -18,7 +23,8 @@ class SolverOptions(eqx.Module):
     compiles the solver again.
 
     Args:
-        tol: tolerance on the scaled residual (see :class:`pacjax.Equilibrium`); default 1e-10.
+        tol: tolerance on the scaled residual (see :class:`pacjax.Equilibrium`); default None:
+            1e-10 in float64, 1e-4 in float32 (:data:`DEFAULT_TOL`).
         max_steps: maximum continuation steps per escape attempt; default 100.
         initial_dt: first pseudo-time step, in units of the elastic relaxation time; default 1.
             With strain coordinates (``PolynomialCurvature``) a conservative solve whose
@@ -41,7 +47,7 @@ class SolverOptions(eqx.Module):
             Both are exact; they differ in cost.
     """
 
-    tol: float = eqx.field(static=True, default=1e-10)
+    tol: float | None = eqx.field(static=True, default=None)
     max_steps: int = eqx.field(static=True, default=100)
     initial_dt: float = eqx.field(static=True, default=1.0)
     max_dt: float = eqx.field(static=True, default=1e12)
@@ -63,7 +69,7 @@ class SolverOptions(eqx.Module):
                 raise TypeError(f"{name} must be an integer, got {value!r}")
         for name in ("tol", "initial_dt", "max_dt", "escape_size", "stability_tol"):
             value = getattr(self, name)
-            if value is None and name == "stability_tol":
+            if value is None and name in ("tol", "stability_tol"):
                 continue
             if isinstance(value, bool) or not isinstance(value, (int, float, np.floating)):
                 raise TypeError(f"{name} must be a number, got {value!r}")
@@ -77,13 +83,16 @@ class SolverOptions(eqx.Module):
             raise TypeError(f"flow_solver must be a diffrax solver, got {self.flow_solver!r}")
 
 
-def resolve_options(options: SolverOptions | None = None, **overrides) -> SolverOptions:
+def resolve_options(options: SolverOptions | None = None, dtype=None, **overrides) -> SolverOptions:
     """``options`` (default ``SolverOptions()``) with the fields in ``overrides``
-    replaced. A name that is not a field raises a TypeError that lists the valid ones."""
+    replaced, and, given the solve's ``dtype``, its default tolerance filled in. A name that
+    is not a field raises a TypeError that lists the valid ones."""
     if options is None:
         options = SolverOptions()
     elif not isinstance(options, SolverOptions):
         raise TypeError(f"options must be a pacjax.SolverOptions, got {type(options).__name__}")
+    if dtype is not None and options.tol is None and "tol" not in overrides:
+        options = dataclasses.replace(options, tol=DEFAULT_TOL[np.dtype(dtype).name])
     if not overrides:
         return options
     fields = [f.name for f in dataclasses.fields(SolverOptions)]

@@ -273,6 +273,8 @@ def _batch_attrs(scene_file, sampler, seed, lo, hi, use_float32, options) -> dic
     solved, so that the file alone says how to reproduce it."""
     with open(scene_file, encoding="utf-8") as f:
         scene_text = f.read()
+    from .._statics.options import DEFAULT_TOL
+
     return {
         "scene_toml": scene_text,
         "sampler": sampler,
@@ -280,7 +282,7 @@ def _batch_attrs(scene_file, sampler, seed, lo, hi, use_float32, options) -> dic
         "low": lo,
         "high": hi,
         "dtype": "float32" if use_float32 else "float64",
-        "tol": float(options.get("tol", pj.SolverOptions().tol)),
+        "tol": float(options.get("tol") or DEFAULT_TOL["float32" if use_float32 else "float64"]),
     }
 
 

@@ -1,0 +1,294 @@
+"""The space of scenes a user can write, and the properties every solve on them must have.
+
+Shared by the fast profile in the default test step (``tests/test_campaign.py``) and the deep
+campaign (``benchmarks/campaign.py``).
+
+A scene is a STRUCTURE (segments, strain models, extensibility, load kinds and sites, tendon
+anchors, routing, ring counts and modes, precision: what a compilation depends on) and VALUES
+(lengths, stiffnesses, densities, load magnitudes, tendon angles, offsets and gains, gravity
+and base directions, controls: traced leaves). Structures are drawn by :func:`draw_structure`
+from a seeded generator and a campaign runs many value draws per structure (hypothesis
+strategies from :func:`values`), so its cost is one compilation per structure and operation.
+
+Properties (:func:`check`): no Python exception from a solve (validation errors belong to the
+scene's construction); no NaN or infinity in any result (an energy is NaN only for a
+non-conservative scene, as documented); a converged result has a residual below tolerance; a
+successful one is converged and stable; a batch row equals the single solve of the same
+controls; gradients through the equilibrium are finite.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from hypothesis import strategies as st
+
+import pacjax as pj
+
+MODELS = ("PCC", "PAC", "Poly0", "Poly1", "Poly2", "Poly3", "PAC+PCC", "Poly*")
+RING_COUNTS = (2, 3, 5, 11, 40)
+SEGMENT_COUNTS = (1, 1, 2, 2, 3, 3, 4, 5, 8, 12, 24)
+TOLS = {"float64": 1e-10, "float32": 1e-4}
+#: Tips of a batch row and its single solve agree to this fraction of the robot's length.
+SAME_TIP = {"float64": 1e-6, "float32": 1e-3}
+
+
+@dataclasses.dataclass(frozen=True)
+class Structure:
+    """What a compilation depends on."""
+
+    models: tuple[str, ...]  # per segment: "PCC", "PAC", "Poly0".."Poly3"
+    extensible: tuple[bool, ...]
+    masses: tuple[tuple[int, float], ...]  # (segment, s)
+    forces: tuple[tuple[int, float, bool], ...]  # (segment, s, follower)
+    moments: tuple[tuple[int, float], ...]
+    tendons: tuple[tuple[int, float, str, int, str, bool], ...]  # anchor, s, routing, rings,
+    #   mode, bowden
+    gravity: bool
+    dtype: str
+
+    @property
+    def n_segments(self) -> int:
+        return len(self.models)
+
+    def describe(self) -> str:
+        return (
+            f"{self.n_segments} seg {'/'.join(sorted(set(self.models)))}, "
+            f"{len(self.masses)} masses, {len(self.forces)} forces, {len(self.moments)} moments, "
+            f"{len(self.tendons)} tendons, gravity {self.gravity}, {self.dtype}"
+        )
+
+
+def draw_structure(rng: np.random.Generator, *, max_segments: int = 24) -> Structure:
+    """A random structure from the scene space."""
+    n = int(rng.choice([k for k in SEGMENT_COUNTS if k <= max_segments]))
+    kind = str(rng.choice(MODELS))
+    if kind == "PAC+PCC":
+        models = tuple(str(rng.choice(["PAC", "PCC"])) for _ in range(n))
+    elif kind == "Poly*":
+        models = tuple(f"Poly{int(rng.integers(0, 4))}" for _ in range(n))
+    else:
+        models = (kind,) * n
+    extensible = tuple(bool(rng.random() < 0.9) for _ in range(n))
+
+    def site():
+        return int(rng.integers(0, n)), float(np.round(rng.uniform(0.05, 1.0), 3))
+
+    gravity = bool(rng.random() < 0.85)
+    n_masses = int(rng.choice([0, 0, 1, 2, 3, 5, 6, 7, 9, 16, 20])) if gravity else 0
+    masses = tuple(site() for _ in range(n_masses))
+    forces = tuple((*site(), bool(rng.random() < 0.3)) for _ in range(int(rng.integers(0, 3))))
+    moments = tuple(site() for _ in range(int(rng.choice([0, 0, 0, 1, 2]))))
+    tendons = []
+    for _ in range(int(rng.choice([0, 1, 2, 2, 3, 4]))):
+        anchor = int(rng.integers(0, n))
+        s = float(rng.choice([1.0, 1.0, np.round(rng.uniform(0.2, 1.0), 3)]))
+        routing = "channel" if rng.random() < 0.3 else "rings"
+        rings = int(rng.choice(RING_COUNTS))
+        mode = "tension" if rng.random() < 0.5 else "length"
+        bowden = bool(anchor > 0 and rng.random() < 0.3)
+        tendons.append((anchor, s, routing, rings, mode, bowden))
+    dtype = "float32" if rng.random() < 0.25 else "float64"
+    return Structure(models, extensible, masses, forces, moments, tuple(tendons), gravity, dtype)
+
+
+def _log_uniform(low: float, high: float):
+    return st.floats(math.log10(low), math.log10(high)).map(lambda x: 10.0**x)
+
+
+def _unit_vector():
+    return (
+        st.tuples(*[st.floats(-1.0, 1.0)] * 3)
+        .filter(lambda v: np.linalg.norm(v) > 0.1)
+        .map(lambda v: tuple(np.asarray(v) / np.linalg.norm(v)))
+    )
+
+
+def values(structure: Structure):
+    """A hypothesis strategy of the VALUES of a scene of ``structure``."""
+    n = structure.n_segments
+    segment = st.fixed_dictionaries(
+        {
+            "length": st.floats(0.03, 0.3),
+            "bending_stiffness": _log_uniform(1e-4, 1e-1),  # N m^2
+            "axial_stiffness": _log_uniform(1e2, 1e5),  # N/m
+            "linear_density": st.floats(0.0, 0.5),  # kg/m
+        }
+    )
+    tendon = st.fixed_dictionaries(
+        {
+            "angle": st.floats(-math.pi, math.pi),
+            "offset": st.floats(0.002, 0.02),  # m
+            "gain": _log_uniform(1e2, 1e5),  # N/m
+            "pull": st.floats(0.0, 0.02),  # m, length mode
+            "tension": st.floats(0.0, 5.0),  # N, tension mode
+        }
+    )
+    k = len(structure.tendons)
+    return st.fixed_dictionaries(
+        {
+            "segments": st.lists(segment, min_size=n, max_size=n),
+            "tendons": st.lists(tendon, min_size=k, max_size=k),
+            "masses": st.lists(
+                st.floats(0.0, 0.2), min_size=len(structure.masses), max_size=len(structure.masses)
+            ),
+            "forces": st.lists(
+                st.tuples(*[st.floats(-2.0, 2.0)] * 3),
+                min_size=len(structure.forces),
+                max_size=len(structure.forces),
+            ),
+            "moments": st.lists(
+                st.tuples(*[st.floats(-0.05, 0.05)] * 3),
+                min_size=len(structure.moments),
+                max_size=len(structure.moments),
+            ),
+            "g": st.floats(0.0, 9.81),
+            "gravity_direction": _unit_vector(),
+            "base_axis": _unit_vector(),
+            "base_angle": st.floats(-math.pi, math.pi),
+        }
+    )
+
+
+def _model(name: str):
+    if name == "PCC":
+        return pj.PCC()
+    if name == "PAC":
+        return pj.PAC()
+    return pj.PolynomialCurvature(int(name[-1]))
+
+
+def _rotation(axis, angle) -> np.ndarray:
+    a = np.asarray(axis, float)
+    k = np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
+    return np.eye(3) + math.sin(angle) * k + (1.0 - math.cos(angle)) * (k @ k)
+
+
+def build(structure: Structure, v: dict) -> tuple[pj.Scene, np.ndarray]:
+    """The scene and controls of ``structure`` with values ``v``."""
+    segments = [
+        pj.Segment(**seg, extensible=ext)
+        for seg, ext in zip(v["segments"], structure.extensible, strict=True)
+    ]
+    robot = pj.Robot(segments, base_rotation=_rotation(v["base_axis"], v["base_angle"]))
+    loads = []
+    if structure.gravity:
+        loads.append(pj.Gravity(v["g"], v["gravity_direction"]))
+    loads += [
+        pj.PointMass(m, seg, s) for m, (seg, s) in zip(v["masses"], structure.masses, strict=True)
+    ]
+    loads += [
+        pj.PointForce(np.asarray(f), seg, s, follower=follower)
+        for f, (seg, s, follower) in zip(v["forces"], structure.forces, strict=True)
+    ]
+    loads += [
+        pj.PointMoment(np.asarray(m), seg, s)
+        for m, (seg, s) in zip(v["moments"], structure.moments, strict=True)
+    ]
+    tendons, controls = [], []
+    for t, (anchor, s, routing, rings, mode, bowden) in zip(
+        v["tendons"], structure.tendons, strict=True
+    ):
+        guides = None if routing == "channel" else tuple(np.linspace(0.0, 1.0, rings))
+        tendons.append(
+            pj.Tendon(
+                anchor,
+                t["angle"],
+                t["offset"],
+                s=s,
+                bowden=bowden,
+                mode=mode,
+                gain=t["gain"] if mode == "length" else None,
+                routing=routing,
+                **({} if guides is None else {"guides": guides}),
+            )
+        )
+        controls.append(t["pull"] if mode == "length" else t["tension"])
+    models = [_model(m) for m in structure.models]
+    scene = pj.Scene(
+        robot,
+        models if len(set(structure.models)) > 1 else models[0],
+        tendons=tendons,
+        loads=loads,
+    )
+    if structure.dtype == "float32":
+        scene = pj.astype(scene, jnp.float32)
+    return scene, np.asarray(controls, float)
+
+
+# ------------------------------------------------------------------------------ properties
+class PropertyFailure(AssertionError):
+    """A solve broke one of the campaign's properties."""
+
+
+def _require(ok: bool, what: str) -> None:
+    if not ok:
+        raise PropertyFailure(what)
+
+
+def _check_result(eq, scene: pj.Scene, tol: float, where: str) -> None:
+    q = np.asarray(eq.q)
+    _require(np.all(np.isfinite(q)), f"{where}: non-finite q ({eq.reason})")
+    res = float(eq.residual_norm)
+    _require(math.isfinite(res), f"{where}: non-finite residual ({eq.reason})")
+    energy = float(eq.energy)
+    _require(
+        math.isfinite(energy) or not scene.is_conservative,
+        f"{where}: non-finite energy of a conservative scene",
+    )
+    _require(math.isfinite(float(eq.min_hessian_eigenvalue)), f"{where}: non-finite eigenvalue")
+    if bool(eq.converged):
+        _require(res <= tol * (1.0 + 1e-6), f"{where}: converged with residual {res:.3g}")
+    _require(
+        bool(eq.successful) == (bool(eq.converged) and bool(eq.stable)),
+        f"{where}: successful is not converged and stable ({eq.reason})",
+    )
+    if not bool(eq.successful):
+        _require(eq.reason != "converged", f"{where}: failed without a reason")
+
+
+def _tip(scene, q) -> np.ndarray:
+    return np.asarray(pj.tip_pose(scene, q)[0], float)
+
+
+def check(scene: pj.Scene, controls: np.ndarray, dtype: str, gradient: bool = False) -> dict:
+    """Solve ``scene`` singly and as a batch (and, with ``gradient``, differentiate the tip
+    through the equilibrium); raise :class:`PropertyFailure` on a broken property. Returns
+    what happened (result codes) for the campaign's tally."""
+    tol = TOLS[dtype]
+    single = pj.solve_equilibrium(scene, controls, fallback=False)
+    _check_result(single, scene, tol, "solve_equilibrium")
+    rows = np.stack([controls, 0.5 * controls])
+    batch = pj.solve_batch(scene, rows, fallback=False, progress=False)
+    first = jax.tree.map(lambda x: x[0], batch)
+    for i in range(2):
+        _check_result(jax.tree.map(lambda x, i=i: x[i], batch), scene, tol, f"solve_batch[{i}]")
+    _require(
+        bool(first.successful) == bool(single.successful),
+        f"batch row 0 {first.reason!r} but single {single.reason!r}",
+    )
+    if bool(single.successful):
+        length = float(scene.robot.total_length)
+        gap = np.linalg.norm(_tip(scene, first.q) - _tip(scene, single.q))
+        _require(
+            gap <= SAME_TIP[dtype] * length,
+            f"batch row 0 tip {gap:.3g} m from the single solve's",
+        )
+    out = {"single": pj.RESULTS[single.result] or "successful"}
+    if gradient and scene.n_tendons and bool(single.successful):
+        grad = _tip_gradient(scene, jnp.asarray(controls, single.q.dtype))
+        _require(np.all(np.isfinite(grad)), "non-finite gradient of the tip by the controls")
+    return out
+
+
+def _tip_gradient(scene, controls):
+    @jax.jit
+    def tip_x(u):
+        eq = pj.solve_equilibrium(scene, u, fallback=False)
+        return pj.tip_pose(scene, eq.q)[0][0]
+
+    return np.asarray(jax.grad(tip_x)(controls))

@@ -1,0 +1,103 @@
+"""The fast profile of the scene-space campaign (issue 28): a few structures from the space a
+user can write, hundreds of value draws on them (see ``tests/scene_space.py`` for the space and
+the properties; ``benchmarks/campaign.py`` runs the deep profile over many structures)."""
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from scene_space import Structure, build, check, values
+
+#: Small structures (each one compilation) that still cross the space: a mixed PAC/PCC robot
+#: with masses at odd counts, ring and channel tendons in both modes and a follower force; an
+#: inextensible polynomial robot with a moment and a Bowden tendon; a float32 PCC robot.
+STRUCTURES = {
+    "pac-pcc": Structure(
+        models=("PAC", "PCC"),
+        extensible=(True, True),
+        masses=((0, 0.3), (0, 0.7), (1, 0.5)),
+        forces=((1, 1.0, True),),
+        moments=(),
+        tendons=((1, 1.0, "rings", 3, "length", False), (0, 0.8, "channel", 2, "tension", False)),
+        gravity=True,
+        dtype="float64",
+    ),
+    "poly": Structure(
+        models=("Poly2", "Poly1"),
+        extensible=(False, True),
+        masses=((1, 0.25), (0, 0.9)),
+        forces=(),
+        moments=((1, 1.0),),
+        tendons=((1, 1.0, "rings", 5, "tension", True),),
+        gravity=True,
+        dtype="float64",
+    ),
+    "pac-pcc-conservative": Structure(
+        models=("PAC", "PCC"),
+        extensible=(True, False),
+        masses=((0, 0.3), (0, 0.7), (1, 0.5)),
+        forces=((1, 0.5, False),),
+        moments=(),
+        tendons=((1, 1.0, "rings", 5, "length", False), (0, 0.8, "channel", 2, "tension", False)),
+        gravity=True,
+        dtype="float64",
+    ),
+    "pcc-float32": Structure(
+        models=("PCC",),
+        extensible=(True,),
+        masses=((0, 0.5), (0, 1.0), (0, 0.2), (0, 0.6), (0, 0.8)),
+        forces=((0, 0.4, False),),
+        moments=(),
+        tendons=((0, 1.0, "rings", 11, "length", False), (0, 1.0, "rings", 2, "tension", False)),
+        gravity=True,
+        dtype="float32",
+    ),
+}
+
+#: The default step's structures: conservative ones compile in 12-18 s on 2 cores, and a
+#: draw costs ~0.05 s. Follower forces and dead moments (non-conservative: a larger program,
+#: and retries that compile more on a failed draw) run in the slow step.
+DEFAULT_STEP = ("pac-pcc-conservative", "pcc-float32")
+
+
+def _settings(examples: int):
+    return settings(
+        max_examples=examples,
+        deadline=None,
+        derandomize=True,
+        database=None,
+        suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large],
+    )
+
+
+def _draw_and_check(name, data):
+    structure = STRUCTURES[name]
+    scene, controls = build(structure, data.draw(values(structure)))
+    check(scene, controls, structure.dtype)
+
+
+@pytest.mark.parametrize("name", DEFAULT_STEP)
+@_settings(150)
+@given(data=st.data())
+def test_every_draw_solves_or_says_why(name, data):
+    _draw_and_check(name, data)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", sorted(set(STRUCTURES) - set(DEFAULT_STEP)))
+@_settings(20)
+@given(data=st.data())
+def test_every_draw_of_a_non_conservative_scene_solves_or_says_why(name, data):
+    _draw_and_check(name, data)
+
+
+def test_the_structures_cross_the_space():
+    kinds = {m for s in STRUCTURES.values() for m in s.models}
+    assert {"PAC", "PCC", "Poly1", "Poly2"} <= kinds
+    assert {s.dtype for s in STRUCTURES.values()} == {"float32", "float64"}
+    routes = {t[2] for s in STRUCTURES.values() for t in s.tendons}
+    modes = {t[4] for s in STRUCTURES.values() for t in s.tendons}
+    assert routes == {"rings", "channel"} and modes == {"length", "tension"}
+    assert any(not all(s.extensible) for s in STRUCTURES.values())
+    assert np.any([len(s.masses) in (3, 5) for s in STRUCTURES.values()])  # the issue's counts
+    assert set(DEFAULT_STEP) < set(STRUCTURES)
