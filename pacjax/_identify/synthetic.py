@@ -212,9 +212,10 @@ def synthetic_mocap(
         scene: the robot with the true parameters.
         controls: (frames, n_tendons) commands.
         sites: marker sites (default: the scene's markers).
-        payload_mass, payload_site, force, force_site, force_follower, base_rotation,
-        gravity_direction, frame_values: per-frame loads, base and gravity directions and
-            other values, as in :meth:`MocapDataset.from_arrays`.
+        payload_mass, payload_site, force, force_site, force_follower: per-frame loads, as
+            in :meth:`MocapDataset.from_arrays`.
+        base_rotation, gravity_direction, frame_values: per-frame base and gravity
+            directions and other values, as in :meth:`MocapDataset.from_arrays`.
         frame_update: the hook that puts ``frame_values`` into the scene (as in
             :func:`pacjax.identify`).
         noise: standard deviation (m) of the Gaussian noise on each marker coordinate.
