@@ -22,6 +22,7 @@ from __future__ import annotations
 import dataclasses
 import math
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -255,10 +256,13 @@ def _tip(scene, q) -> np.ndarray:
     return np.asarray(pj.tip_pose(scene, q)[0], float)
 
 
-def check(scene: pj.Scene, controls: np.ndarray, dtype: str, gradient: bool = False) -> dict:
-    """Solve ``scene`` singly and as a batch (and, with ``gradient``, differentiate the tip
-    through the equilibrium); raise :class:`PropertyFailure` on a broken property. Returns
-    what happened (result codes) for the campaign's tally."""
+def check(
+    scene: pj.Scene, controls: np.ndarray, dtype: str, operations: tuple[str, ...] = ()
+) -> dict:
+    """Solve ``scene`` singly and as a batch, and run the further ``operations`` (any of
+    ``"gradient"``: the tip differentiated through the equilibrium; ``"find_equilibria"``: four
+    starts; ``"simulate"``: 10 ms of motion); raise :class:`PropertyFailure` on a broken
+    property. Returns what happened (result codes) for the campaign's tally."""
     tol = TOLS[dtype]
     single = pj.solve_equilibrium(scene, controls, fallback=False)
     _check_result(single, scene, tol, "solve_equilibrium")
@@ -279,16 +283,34 @@ def check(scene: pj.Scene, controls: np.ndarray, dtype: str, gradient: bool = Fa
             f"batch row 0 tip {gap:.3g} m from the single solve's",
         )
     out = {"single": pj.RESULTS[single.result] or "successful"}
-    if gradient and scene.n_tendons and bool(single.successful):
+    if "gradient" in operations and scene.n_tendons and bool(single.successful):
         grad = _tip_gradient(scene, jnp.asarray(controls, single.q.dtype))
         _require(np.all(np.isfinite(grad)), "non-finite gradient of the tip by the controls")
+    if "find_equilibria" in operations:
+        found = pj.find_equilibria(scene, controls, n_starts=4, fallback=False)
+        for i in range(len(found)):
+            _check_result(found[i], scene, tol, f"find_equilibria[{i}]")
+        out["equilibria"] = len(found)
+    if "simulate" in operations and all(
+        float(seg.linear_density) > 0 for seg in scene.robot.segments
+    ):
+        motion = pj.simulate(scene, (0.0, 0.01), controls, saveat=np.linspace(0.0, 0.01, 3))
+        if bool(motion.successful):
+            _require(
+                np.all(np.isfinite(np.asarray(motion.q))), "simulate: non-finite q, successful"
+            )
+        out["simulate"] = pj.RESULTS[motion.result] or "successful"
     return out
 
 
 def _tip_gradient(scene, controls):
-    @jax.jit
+    return np.asarray(_tip_gradient_jit(scene, controls))
+
+
+@eqx.filter_jit  # one compilation per structure: the scene's values are traced
+def _tip_gradient_jit(scene, controls):
     def tip_x(u):
         eq = pj.solve_equilibrium(scene, u, fallback=False)
         return pj.tip_pose(scene, eq.q)[0][0]
 
-    return np.asarray(jax.grad(tip_x)(controls))
+    return jax.grad(tip_x)(controls)

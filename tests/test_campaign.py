@@ -101,3 +101,14 @@ def test_the_structures_cross_the_space():
     assert any(not all(s.extensible) for s in STRUCTURES.values())
     assert np.any([len(s.masses) in (3, 5) for s in STRUCTURES.values()])  # the issue's counts
     assert set(DEFAULT_STEP) < set(STRUCTURES)
+
+
+def test_found_a_segment_too_light_to_simulate_says_so():
+    """Found by the campaign: a density of 1e-308 kg/m passes the ``> 0`` check, and the
+    default damping then raised "Damping.stiffness must be finite, got nan"."""
+    import pacjax as pj
+
+    segments = [pj.Segment(0.25, 0.1, 100.0, linear_density=d) for d in (0.5, 2.2e-308)]
+    scene = pj.Scene(pj.Robot(segments), pj.PCC())
+    with pytest.raises(ValueError, match="linear_density .* is too small to simulate"):
+        pj.simulate(scene, (0.0, 0.01))

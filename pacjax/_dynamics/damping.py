@@ -9,7 +9,7 @@ from jaxtyping import Array, Float
 from .._config import MATMUL_PRECISION
 from .._model.inertia import mass_matrix
 from .._model.inputs import solver_dtype
-from .._model.robot import as_float, check_positive
+from .._model.robot import as_float, check_positive, concrete
 from .._model.scene import Scene
 
 #: Damping ratio of the lowest mode of the straight body under the default damping.
@@ -66,6 +66,16 @@ class Damping(eqx.Module):
             raise ValueError(f"ratio must be a finite number >= 0, got {ratio}")
         dtype = solver_dtype(scene)
         omega = jnp.sqrt(jnp.min(_rest_eigenvalues(scene, dtype)))
+        value = concrete(omega)
+        if value is not None and not (np.isfinite(value) and value > 0):
+            # A segment so light that M is singular in this precision (a density of 1e-308
+            # kg/m passes the > 0 check): say so, not "Damping.stiffness must be finite".
+            lightest = min(float(seg.linear_density) for seg in scene.robot.segments)
+            raise ValueError(
+                "the mass matrix of the robot is singular in this precision (lowest mode "
+                f"{value}): a segment's linear_density ({lightest:g} kg/m) is too small to "
+                "simulate dynamics"
+            )
         return cls(stiffness=2.0 * ratio / omega, **kwargs)
 
     def tendon_gains(self, scene: Scene, dtype) -> Float[Array, " m"]:
