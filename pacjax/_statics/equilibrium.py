@@ -75,6 +75,7 @@ def _stability_tol(opts, dtype):
 
 def make_solver(scene: Scene, opts: SolverOptions, dtype) -> PseudoTransientContinuation:
     """The continuation root finder for a scene's structure and the solver options."""
+    opts = resolve_options(opts, dtype)
     return PseudoTransientContinuation(
         rtol=0.0,
         atol=opts.tol,
@@ -99,6 +100,7 @@ def start_point(problem: "ScaledProblem", q0, opts: SolverOptions):
     """Scaled starting point ``y0 = q0 / sigma``, its straight segments' bending planes turned
     to the force (:meth:`ScaledProblem.aligned`); no derivative flows through the start."""
     problem = frozen(problem)
+    opts = resolve_options(opts, q0.dtype)
     return problem.aligned(jax.lax.stop_gradient(q0) / problem.sigma, opts.tol)
 
 
@@ -135,6 +137,7 @@ def solve_core_linearised(scene: Scene, controls, q0, opts: SolverOptions):
     from the continuation's last linearisation, with the scaling (``y = q / sigma``,
     ``r = row * F``): ``(equilibrium, (jacobian, sigma, row))``, no derivative flowing through
     the last three."""
+    opts = resolve_options(opts, q0.dtype)  # the precision's default tolerance
     problem = ScaledProblem.build(scene, controls)
     fixed = frozen(problem)
     y0 = start_point(problem, q0, opts)

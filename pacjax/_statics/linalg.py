@@ -87,8 +87,31 @@ def _grouped(fn):
     return wrapped
 
 
+def _one_matrix_per_call(fn):
+    """``fn`` on a problem of several matrices (leading axes of every argument), one matrix per
+    LAPACK call when together they would exceed the inline budget: a call of one matrix runs
+    inline whatever its size, a call of two 100 x 100 systems does not (a 12-segment cubic
+    polynomial robot under a follower force: two pool lanes, each factorising its two systems
+    on the intra-op pool, hung)."""
+
+    def call(a, *rest):
+        lead = a.shape[:-2]
+        count = math.prod(lead)
+        if (
+            count <= 1
+            or jax.default_backend() != "cpu"
+            or count * _WORK_PER_CUBE * a.shape[-1] ** 3 < _INLINE_WORK
+        ):
+            return fn(a, *rest)
+        flat = [x.reshape((count,) + x.shape[len(lead) :]) for x in (a, *rest)]
+        out = jax.lax.map(lambda xs: fn(*xs), tuple(flat))
+        return jtu.tree_map(lambda x: x.reshape(lead + x.shape[1:]), out)
+
+    return call
+
+
 #: ``jnp.linalg.eigh`` of one symmetric matrix; see the module docstring.
-eigh = _grouped(jnp.linalg.eigh)
+eigh = _grouped(_one_matrix_per_call(jnp.linalg.eigh))
 
 #: ``jnp.linalg.solve(a, b)`` of one system (``a`` (..., n, n)); see the module docstring.
-solve = _grouped(jnp.linalg.solve)
+solve = _grouped(_one_matrix_per_call(jnp.linalg.solve))
