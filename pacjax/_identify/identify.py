@@ -33,7 +33,7 @@ import optax
 
 from .. import _deprecated
 from .._model.frameloads import with_frame_loads
-from .._model.inputs import check_scene
+from .._model.inputs import check_int, check_scene
 from .._model.scene import Scene
 from .._model.sites import normalise_sites
 from .._results import RESULTS
@@ -232,8 +232,8 @@ def identify(
     t_start = time.perf_counter()
     dataset, validation = _check_data(scene, dataset, validation, holdout, seed)
     _check_settings(loss, noise, orientation_noise, huber_delta, max_iterations, optimizer)
-    n_starts = _check_count("n_starts", n_starts, 1)
-    branch_starts = _check_count("branch_starts", branch_starts, 0)
+    n_starts = check_int("n_starts", n_starts, 1)
+    branch_starts = check_int("branch_starts", branch_starts, 0)
     if stages is not None:
         settings = dict(
             per_segment=per_segment,
@@ -288,14 +288,6 @@ def identify(
         runs.append(_descend(fit, train, theta, start, settings))
     best = min(runs, key=lambda run: (not run.successful, run.current.cost()))
     return _report(fit, train, best, runs, t_start, first_eval_s)
-
-
-def _check_count(name: str, value, minimum: int) -> int:
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
-        raise TypeError(f"{name} must be an integer, got {value!r}")
-    if value < minimum:
-        raise ValueError(f"{name} must be >= {minimum}, got {value}")
-    return int(value)
 
 
 # ------------------------------------------------------------------------------ the problem

@@ -19,6 +19,16 @@ def frozen(tree):
     return jtu.tree_map(lambda x: jax.lax.stop_gradient(x) if eqx.is_array(x) else x, tree)
 
 
+def check_int(name: str, value, minimum: int) -> int:
+    """``value`` as an int, or a TypeError (not an integer) / ValueError (below ``minimum``)
+    naming ``name``."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+        raise TypeError(f"{name} must be an integer, got {value!r}")
+    if value < minimum:
+        raise ValueError(f"{name} must be >= {minimum}, got {value}")
+    return int(value)
+
+
 def check_scene(scene) -> None:
     """Raise a TypeError unless ``scene`` is a :class:`pacjax.Scene`."""
     if not isinstance(scene, Scene):

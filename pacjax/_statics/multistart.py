@@ -21,7 +21,7 @@ import numpy as np
 from jaxtyping import Array, Int
 
 from .._jit import jit
-from .._model.inputs import check_controls, check_scene, solver_dtype
+from .._model.inputs import check_controls, check_int, check_scene, solver_dtype
 from .._model.scene import Scene
 from .._results import RESULTS
 from .batch import solve_batch
@@ -138,14 +138,6 @@ def _shape_signatures(scene: Scene, qs):
     return jax.vmap(one)(qs)
 
 
-def _check_int(name: str, value, minimum: int) -> int:
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
-        raise TypeError(f"{name} must be an integer, got {value!r}")
-    if value < minimum:
-        raise ValueError(f"{name} must be >= {minimum}, got {value}")
-    return int(value)
-
-
 def find_equilibria(
     scene: Scene,
     controls=None,
@@ -186,8 +178,8 @@ def find_equilibria(
         :class:`Equilibria`, lowest energy first.
     """
     check_scene(scene)
-    n_starts = _check_int("n_starts", n_starts, 1)
-    seed = _check_int("seed", seed, 0)
+    n_starts = check_int("n_starts", n_starts, 1)
+    seed = check_int("seed", seed, 0)
     if spread is None:
         spread = np.geomspace(*SPREADS, n_starts)
     elif isinstance(spread, bool) or not np.isscalar(spread) or not np.isfinite(spread):
