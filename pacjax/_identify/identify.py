@@ -36,11 +36,9 @@ from .._model.frameloads import with_frame_loads
 from .._model.inputs import check_int, check_scene
 from .._model.scene import Scene
 from .._model.sites import normalise_sites
-from .._results import RESULTS
 from .._statics.options import SolverOptions, resolve_options
-from .branches import Branches, BranchTracker
 from .dataset import MocapDataset
-from .optimise import History, optimise
+from .descent import Descent, DescentSettings, descend, run_summary, starting_points
 from .problem import (
     L2_DELTA,
     PARAMETERS,
@@ -201,7 +199,8 @@ def identify(
         branch_starts: scattered starts from which every frame is solved again at the fit's
             start and whenever it stops: a frame whose markers another stable equilibrium fits
             clearly better (RMSE below 80 % of its own and 3 ``noise`` lower) is moved to it
-            and the fit resumes (at most :data:`MAX_ROUNDS` times). 0 turns the checks off.
+            and the fit resumes (at most
+            :data:`pacjax._identify.descent.MAX_ROUNDS` times). 0 turns the checks off.
             Steps on which a frame jumps to another branch (its markers move further than the
             step's linearisation predicts plus 2 % of the robot's length) are rejected either
             way. See :class:`pacjax.Branches`.
@@ -279,13 +278,13 @@ def identify(
         train.prior = Prior(fit.problem, dict(priors))
     align = "mocap_transform" in params and mocap_transform is None
     fit, current, first_eval_s = _start(fit, train, np.zeros(fit.problem.n_theta), align)
-    settings = _Settings(optimizer, max_iterations, tol, progress, branch_starts, seed)
+    settings = DescentSettings(optimizer, max_iterations, tol, progress, branch_starts, seed)
     runs = []
-    for k, theta in enumerate(_starting_points(fit, n_starts, seed)):
+    for k, theta in enumerate(starting_points(fit, n_starts, seed)):
         start = current if k == 0 else train(theta)
         if k and not start.valid[: fit.dataset.n_frames].any():
             continue  # no frame has an equilibrium at this start: nothing to descend from
-        runs.append(_descend(fit, train, theta, start, settings))
+        runs.append(descend(fit, train, theta, start, settings))
     best = min(runs, key=lambda run: (not run.successful, run.current.cost()))
     return _report(fit, train, best, runs, t_start, first_eval_s)
 
@@ -428,99 +427,7 @@ def _start(fit: _Fit, train: Evaluator, theta, align: bool):
     return fit, current, first_eval_s
 
 
-#: Descents after which frames still moving to better-fitting branches end a fit.
-MAX_ROUNDS = 4
-
-
-@dataclasses.dataclass(frozen=True)
-class _Settings:
-    """How one descent runs."""
-
-    optimizer: object
-    max_iterations: int
-    tol: float
-    progress: bool | None
-    branch_starts: int
-    seed: int
-
-
-@dataclasses.dataclass
-class _Run:
-    """One descent: its optimum, evaluation, history, stop and the frames' branches."""
-
-    theta: np.ndarray
-    current: object
-    history: History
-    stop: tuple  # (iterations, result, message)
-    branches: Branches
-
-    @property
-    def successful(self) -> bool:
-        return bool(self.stop[1] == RESULTS.successful)
-
-
-def _starting_points(fit: _Fit, n_starts: int, seed: int) -> list[np.ndarray]:
-    """The internal coordinates of each start: the given values, then random factors within
-    x1/4..x4 on every positive parameter (clipped to the bounds)."""
-    rng = np.random.default_rng(seed)
-    log = np.concatenate([np.full(b.size, b.log) for b in fit.problem.blocks])
-    points = [np.zeros(fit.problem.n_theta)]
-    for _ in range(n_starts - 1):
-        theta = np.where(log, rng.uniform(-np.log(4.0), np.log(4.0), log.size), 0.0)
-        points.append(np.clip(theta, *fit.bounds))
-    return points
-
-
-def _descend(fit: _Fit, train: Evaluator, theta, current, settings: _Settings) -> _Run:
-    """Optimiser descents from ``theta`` on the data's branches: a branch check first, and
-    after every descent that stops short of the iteration limit; a check that moves frames
-    starts another descent."""
-    n = fit.dataset.n_frames
-    tracker = BranchTracker(
-        fit.problem.scene, fit.dataset.markers, fit.noise, settings.branch_starts, settings.seed
-    )
-    history = History(
-        current,
-        fit.n_observations,
-        fit.dataset.markers,
-        settings.max_iterations,
-        settings.progress,
-    )
-    current, moved = tracker.check(train, theta, current)
-    if moved.any():
-        history.restart(current)
-    iterations = 0
-    for _ in range(MAX_ROUNDS):
-        theta, current, (its, result, message) = optimise(
-            train,
-            theta,
-            current,
-            settings.optimizer,
-            settings.max_iterations - iterations,
-            settings.tol,
-            history,
-            fit.bounds,
-            tracker,
-        )
-        iterations += its
-        if bool(result == RESULTS.max_steps_reached):
-            break
-        current, moved = tracker.check(train, theta, current)
-        if not moved.any():
-            break
-        history.restart(current)
-    else:
-        tracker.branches.off_branch = moved[:n]
-        result = RESULTS.branch_mismatch
-        message = (
-            f"stopped: frames {np.flatnonzero(moved).tolist()} still fit better on another "
-            f"equilibrium branch after {MAX_ROUNDS} descents"
-        )
-    history.bar.close()
-    return _Run(theta, current, history, (iterations, result, message), tracker.branches)
-
-
-def _report(fit: _Fit, train, best: _Run, runs: list, t_start, first_eval_s):
+def _report(fit: _Fit, train, best: Descent, runs: list, t_start, first_eval_s):
     """The fitted scene and the :class:`IdentificationReport` of the best descent."""
     problem = fit.problem
     theta, current = best.theta, best.current
@@ -554,19 +461,9 @@ def _report(fit: _Fit, train, best: _Run, runs: list, t_start, first_eval_s):
         first_evaluation_s=first_eval_s,
         noise=fit.noise,
         branches=best.branches,
-        starts=[_run_summary(run, fit.n_observations) for run in runs] if len(runs) > 1 else None,
+        starts=[run_summary(run, fit.n_observations) for run in runs] if len(runs) > 1 else None,
     )
     return out_scene, report
-
-
-def _run_summary(run: _Run, n_obs: int) -> dict:
-    iterations, _, message = run.stop
-    return {
-        "loss": run.current.cost() / n_obs,
-        "rmse_mm": run.history.rmse[-1],
-        "iterations": iterations,
-        "message": message,
-    }
 
 
 def _staged(scene: Scene, dataset: MocapDataset, stages, settings: dict, t_start: float):
