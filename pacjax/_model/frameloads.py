@@ -96,12 +96,12 @@ def with_frame_loads(
         seg, s = _site(dataset.force_site, scene, "force_site")
         force_index = len(loads)
         loads.append(PointForce(jnp.zeros(3), seg, s, follower=dataset.force_follower))
-    if getattr(dataset, "gravity_direction", None) is not None:
+    if dataset.gravity_direction is not None:
         found = [k for k, load in enumerate(loads) if isinstance(load, Gravity)]
         if not found:
             raise ValueError("the dataset has gravity_direction but the scene has no Gravity load")
         gravity_index = found[0]
-    _check_hook(getattr(dataset, "frame_values", None), frame_update)
+    _check_hook(dataset.frame_values, frame_update)
     # Marker sites are static structure the solver does not need: dropping them lets scenes
     # that differ only in their markers share one compiled solver.
     new = Scene(

@@ -74,8 +74,8 @@ def _stability_tol(opts, dtype):
 
 
 def make_solver(scene: Scene, opts: SolverOptions, dtype) -> PseudoTransientContinuation:
-    """The continuation root finder for a scene's structure and the solver options."""
-    opts = resolve_options(opts, dtype)
+    """The continuation root finder for a scene's structure and the solver options (their
+    tolerance resolved: :func:`solve_core_linearised` and :func:`pacjax.solve_batch` do it)."""
     return PseudoTransientContinuation(
         rtol=0.0,
         atol=opts.tol,
@@ -100,7 +100,6 @@ def start_point(problem: "ScaledProblem", q0, opts: SolverOptions):
     """Scaled starting point ``y0 = q0 / sigma``, its straight segments' bending planes turned
     to the force (:meth:`ScaledProblem.aligned`); no derivative flows through the start."""
     problem = frozen(problem)
-    opts = resolve_options(opts, q0.dtype)
     return problem.aligned(jax.lax.stop_gradient(q0) / problem.sigma, opts.tol)
 
 

@@ -18,7 +18,6 @@ import numpy as np
 
 from .._jit import jit
 from .equilibrium import equilibrium_from, make_solver, max_total_steps, start_point
-from .options import resolve_options
 from .problem import ScaledProblem
 
 #: Continuation steps per round of the slot pool (a finished row waits at most this many
@@ -63,7 +62,6 @@ def _advance(scene, opts, update, controls, params, y, state, reset, y_reset, ac
     Returns the new ``(y, state)``, whether each slot is done, and its :class:`Equilibrium`.
     """
     dtype = controls.dtype
-    opts = resolve_options(opts, dtype)
     limit = max_total_steps(opts)
     per_round = _steps_per_round()
     fn = ScaledProblem.root_fn
