@@ -6,9 +6,8 @@ On pacjax's vector fields, whose kinematics is thousands of primitives, tracing 
 linearisation was two thirds of the time to trace a simulation. :class:`DenseChord` is the same
 method with the Jacobian taken in one ``jax.jacfwd`` (``lineax.materialise`` of the Jacobian
 operator): the same matrix, the same iterates and the same termination
-(``diffrax.VeryChord``'s). On the tests' one-segment scene, with the vector field jitted on its
-own in both runs, a simulation traced in 3.9 s instead of 20.8 s and XLA compiled it in 41 s
-instead of 63 s.
+(``diffrax.VeryChord``'s), traced and compiled in a fraction of the time (the figures are in
+``benchmarks/RESULTS.md``, "Figures behind the solver's settings").
 """
 
 import diffrax

@@ -335,11 +335,11 @@ def simulate(
 
     PCC and PAC through straight segments: their polar coordinates are singular there (the
     force on ``phi`` vanishes with the curvature), so the motion of a segment that is loaded
-    while straight depends on its ``phi``. The paper's robot with PAC, hanging at rest, 40 mm
-    on the tendon at +90 degrees of section 1, tip 10 ms later (lateral, along y): -0.012 mm
-    with every ``phi = 0`` (section 1 stays on the saddle), -2.16 mm with section 1 alone
-    turned to its tendon, -1.40 mm with all three in its plane (the default: the unloaded
-    sections 2 and 3 take section 1's plane). Use ``PolynomialCurvature`` (order 1 is PAC's
+    while straight depends on its ``phi``: with every ``phi = 0`` a segment pulled by a tendon
+    off its plane stays on the saddle and barely moves in the first milliseconds, where turned
+    to its tendon it bends at once (``benchmarks/RESULTS.md``, "Figures behind the solver's
+    settings"). The default turns each straight segment to the force on it at ``t0``, and the
+    unloaded ones to their predecessor's plane. Use ``PolynomialCurvature`` (order 1 is PAC's
     affine law in Cartesian form) to simulate motion through straight segments.
     """
     check_scene(scene)

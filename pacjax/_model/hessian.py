@@ -291,8 +291,8 @@ def follower_jacobian(
     :func:`dead_followers`, ``dead_consts`` the dead scene's constants). The second is
     ``-J_k^T [f_k]x W_k``, with ``W_k`` the angular velocity Jacobian of the frame at ``p_k``.
     The forward derivative of ``Q`` through the whole chain, which this replaces, cost about as
-    much as the rest of the Hessian (the paper's robot with PAC: 346 us per row in all, against
-    137 us for the same robot under a tip mass). The residual itself is not taken from here:
+    much as the rest of the Hessian (``benchmarks/RESULTS.md``, "Follower force: the Jacobian
+    of PCC/PAC scenes"). The residual itself is not taken from here:
     the dead force's work is evaluated on the energy's knots, ``Q`` on its own, and for PAC the
     two differ by up to 3.7e-12 relative (curvatures of a few rad per segment).
     """

@@ -558,9 +558,8 @@ class Scene(eqx.Module):
             return None
         items = followers + moments
         segs = np.asarray([x.segment for x in items])
-        # Known sites take the knot path. (Stacked with jnp they were traced: the paper's robot
-        # with PolynomialCurvature(3) under a follower force, a Jacobian of the residual took
-        # 5.7 ms per row on the grid path against 3.3 ms.)
+        # Known sites take the knot path: stacked with jnp they would be traced, and the frames
+        # would be found on the general grid path, which costs more per row.
         ss = known_sites([x.s for x in items], q.dtype)
         (rot, pos), pullback = jax.vjp(lambda q_: self.frames(q_, segs, ss), q)
         dtype = q.dtype

@@ -8,7 +8,7 @@ many such calls run at once as the pool has threads, every thread waits for task
 is left to run, and the program hangs. Two ways to get there with pacjax: a step with two
 independent solves, and ``pj.solve_batch`` sharded over several CPU devices
 (``--xla_force_host_platform_device_count``), whose devices factorise their slots at the same
-time (seen in gdb on the paper's robot with 2 host devices on 2 cores: both pool threads in
+time (in a debugger: every pool thread in
 ``EigenvalueDecompositionSymmetricKernel -> ParallelBatchMap -> BlockingCounter::Wait``).
 
 The functions here give the same results, but under ``vmap`` on a CPU they split the batch into

@@ -190,8 +190,8 @@ def pool_lanes(chunk: int, sharding, warm_start: bool) -> int:
     :data:`CPU_POOL_SLOTS`). One XLA:CPU execution of a round keeps about 1.45 of 2 cores busy
     (small kernels run on one thread, and the host works between rounds), so on a single CPU
     device :data:`CPU_LANES` pools share the rows, each in its own thread and with the same
-    compiled round: the paper's robot with PAC, 1,000 rows, ran in 0.91-1.02 s on 2 cores
-    (1.85-1.91 of them busy) against 1.11-1.22 s in one pool. Not with several devices (their
+    compiled round, which keeps the cores busy between one pool's rounds (the figures are in
+    ``benchmarks/RESULTS.md``, "Figures behind the solver's settings"). Not with several devices (their
     shards already run in parallel) and not with warm starts (a row's start would depend on
     which rows the other pool had finished by then)."""
     if sharding is not None or warm_start or jax.default_backend() != "cpu":

@@ -35,12 +35,9 @@ _MIN_ALPHA = 1.0 / 256
 # Scaled residual below which a non-conservative solve tries plain Newton steps first.
 _NEWTON_NEAR = 1e-2
 # Bounds on the growth of dt after a full step (the ratio of the residuals before and after it,
-# switched evolution relaxation). The first step from straight takes the residual of the paper's
-# robot from about 10 to 0.1: capped at 10x, the next steps were still 25-40 % short of Newton
-# along the softest mode (the bending planes) and crept; capped at 100x, 1,000 random commands
-# with a 200 g tip mass took 8.11 steps (mean; at most 12) against 8.83 (at most 14), under the
-# 3.41 N follower force 8.04 (at most 24) against 8.42 (at most 30), in float32 6.77 against 7.07.
-# A step that overshoots is still cut by the search on the merit.
+# switched evolution relaxation). A first step from straight can cut the residual a hundredfold;
+# a tighter cap leaves the next steps short of Newton along the softest mode (the bending
+# planes), which then creeps. A step that overshoots is still cut by the search on the merit.
 _DT_GROWTH = (2.0, 100.0)
 
 
