@@ -191,9 +191,9 @@ def pool_lanes(chunk: int, sharding, warm_start: bool) -> int:
     (small kernels run on one thread, and the host works between rounds), so on a single CPU
     device :data:`CPU_LANES` pools share the rows, each in its own thread and with the same
     compiled round, which keeps the cores busy between one pool's rounds (the figures are in
-    ``benchmarks/RESULTS.md``, "Figures behind the solver's settings"). Not with several devices (their
-    shards already run in parallel) and not with warm starts (a row's start would depend on
-    which rows the other pool had finished by then)."""
+    ``benchmarks/RESULTS.md``, "Figures behind the solver's settings"). Not with several
+    devices (their shards already run in parallel) and not with warm starts (a row's start
+    would depend on which rows the other pool had finished by then)."""
     if sharding is not None or warm_start or jax.default_backend() != "cpu":
         return 1
     return max(1, min(CPU_LANES, chunk))
