@@ -304,7 +304,7 @@ def test_cli_inverse(tmp_path, targets):
     bad = tmp_path / "bad.csv"
     bad.write_text("x,y\n0.1,0.2\n")
     result = CliRunner().invoke(cli, ["inverse", str(scene_file), str(bad)])
-    assert result.exit_code == 1 and "expected x,y,z" in result.output
+    assert result.exit_code == 1 and "a header other than x,y,z" in result.output
 
 
 @pytest.mark.parametrize("model", [pj.PAC(), pj.PolynomialCurvature(1)], ids=repr)

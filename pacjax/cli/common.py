@@ -93,6 +93,13 @@ def parse_controls(text: str, n_tendons: int) -> np.ndarray:
     return np.asarray(values)
 
 
+def file_error(path: str, err: Exception) -> click.ClickException:
+    """A one-line user error about ``path``: the file named once, whether or not the message
+    already starts with it (scene-file errors do)."""
+    message = str(err)
+    return click.ClickException(message if message.startswith(f"{path}:") else f"{path}: {message}")
+
+
 def load_with_controls(scene_file: str, controls: str | None):
     """``(scene, controls, extra)`` of a scene file: ``--controls`` if given, else the file's
     ``controls``, else zeros. A malformed file or ``--controls`` is a one-line user error."""

@@ -12,7 +12,7 @@ import numpy as np
 
 import pacjax as pj
 
-from .common import output_dir, solver_options
+from .common import file_error, output_dir, solver_options
 
 
 # ------------------------------------------------------------------------------ fit
@@ -219,9 +219,13 @@ def _echo_fit(name: str, report) -> None:
 
 
 # ------------------------------------------------------------------------------ inverse
-def _read_targets(path: str) -> np.ndarray:
-    """Target tip positions (m) from a CSV file: one ``x,y,z`` row per target, an optional
-    header line (any non-numeric first line), ``#`` comments."""
+#: Length units a targets file may be written in, and their size in metres.
+UNITS = {"m": 1.0, "cm": 1e-2, "mm": 1e-3}
+
+
+def _read_targets(path: str, units: str = "m") -> np.ndarray:
+    """Target tip positions (m) from a CSV file: one ``x,y,z`` row per target in ``units``, an
+    optional ``x,y,z`` header line, ``#`` comments."""
     rows = []
     with open(path, encoding="utf-8") as f:
         lines = [ln.strip() for ln in f if ln.strip() and not ln.lstrip().startswith("#")]
@@ -230,20 +234,44 @@ def _read_targets(path: str) -> np.ndarray:
         try:
             values = [float(c) for c in cells]
         except ValueError:
-            if i == 0:
-                continue  # header
-            raise click.ClickException(f"{path}: row {i + 1} is not numbers: {line!r}") from None
+            if i == 0 and [c.lower() for c in cells] == ["x", "y", "z"]:
+                continue
+            what = "is a header other than x,y,z" if i == 0 else "is not numbers"
+            raise click.ClickException(f"{path}: row {i + 1} {what}: {line!r}") from None
         if len(values) != 3:
             raise click.ClickException(
-                f"{path}: row {i + 1} has {len(values)} value(s); expected x,y,z in metres"
+                f"{path}: row {i + 1} has {len(values)} value(s); expected x,y,z in {units}"
             )
         rows.append(values)
     if not rows:
-        raise click.ClickException(f"{path}: no targets (expected rows of x,y,z in metres)")
-    targets = np.asarray(rows)
+        raise click.ClickException(f"{path}: no targets (expected rows of x,y,z in {units})")
+    targets = np.asarray(rows) * UNITS[units]
     if not np.all(np.isfinite(targets)):
         raise click.ClickException(f"{path}: targets must be finite numbers")
     return targets
+
+
+def _check_reach(path: str, scene, targets: np.ndarray, units: str) -> None:
+    """A target further from the base than the robot is long is a units mistake more often
+    than a wish: say so before anything is compiled."""
+    length = float(scene.robot.total_length)
+    distance = np.linalg.norm(targets - np.asarray(scene.robot.base_position), axis=1)
+    far = int(np.argmax(distance))
+    if distance[far] > 1.5 * length:
+        raise click.ClickException(
+            f"{path}: row {far + 1}: the target is {distance[far]:.4g} m from the base; the robot "
+            f"is {length:.4g} m long. Units? (read as {units}; --units mm|cm|m)"
+        )
+
+
+def _check_tension_limits(scene, upper, max_tension) -> None:
+    """Tension-mode tendons have no natural upper command: the CLI asks for its own flags."""
+    tension = [i for i, t in enumerate(scene.tendons) if t.mode == "tension"]
+    if tension and upper is None and max_tension is None:
+        raise click.ClickException(
+            f"tendon(s) {tension} are in tension mode: give the largest tension with "
+            "--max-tension N (or --upper for every command)"
+        )
 
 
 @click.command()
@@ -271,7 +299,16 @@ def _read_targets(path: str) -> np.ndarray:
 )
 @click.option("--upper", type=click.FloatRange(min=0, min_open=True), help="Largest command (m).")
 @click.option(
-    "--max-tension", type=click.FloatRange(min=0, min_open=True), help="Tension limit, N."
+    "--max-tension",
+    type=click.FloatRange(min=0, min_open=True),
+    help="Tension limit, N (needed when a tendon is in tension mode).",
+)
+@click.option(
+    "--units",
+    type=click.Choice(sorted(UNITS)),
+    default="m",
+    show_default=True,
+    help="Length unit of the targets file.",
 )
 @click.option("--no-plot", is_flag=True, help="Skip the figure.")
 def inverse(
@@ -282,17 +319,20 @@ def inverse(
     tol: float,
     upper: float | None,
     max_tension: float | None,
+    units: str,
     no_plot: bool,
 ):
-    """Tendon commands that put the tip of a TOML scene on the targets of a CSV file (x,y,z in
-    metres per row). Exits with status 3 when a target was not reached."""
+    """Tendon commands that put the tip of a TOML scene on the targets of a CSV file (x,y,z per
+    row, in metres unless --units). Exits with status 3 when a target was not reached."""
     from ..io.scenefile import load_scene
 
     try:
         scene, _, extra = load_scene(scene_file)
     except (ValueError, OSError) as err:
         raise click.ClickException(str(err)) from None
-    targets = _read_targets(targets_file)
+    targets = _read_targets(targets_file, units)
+    _check_reach(targets_file, scene, targets, units)
+    _check_tension_limits(scene, upper, max_tension)
     out = output_dir(out)
     name = extra["name"]
     options = dict(reached_tol=tol, upper=upper, max_tension=max_tension)
@@ -303,12 +343,16 @@ def inverse(
     csv_path = os.path.join(out, f"{name}_commands.csv")
     _write_commands(csv_path, scene.n_tendons, targets, result)
     controls = np.asarray(result.controls)
-    jumps = np.abs(np.diff(controls, axis=0)).max() if len(controls) > 1 else 0.0
     click.echo(
         f"{name}: {int(reached.sum())}/{len(targets)} targets reached within {1e3 * tol:g} mm, "
         f"largest error {1e3 * float(np.max(result.error)):.3g} mm, {seconds:.1f} s"
     )
-    click.echo(f"largest command change between neighbouring rows: {1e3 * jumps:.2f} mm")
+    if len(controls) > 1:
+        jumps = np.abs(np.diff(controls, axis=0)).max(axis=0)
+        tension = np.asarray([t.mode == "tension" for t in scene.tendons])
+        parts = [f"{1e3 * jumps[~tension].max():.2f} mm"] if (~tension).any() else []
+        parts += [f"{jumps[tension].max():.3g} N"] if tension.any() else []
+        click.echo(f"largest command change between neighbouring rows: {', '.join(parts)}")
     click.echo(f"wrote {csv_path}")
     if not no_plot:
         png_path = os.path.join(out, f"{name}_inverse.png")
@@ -331,7 +375,7 @@ def _solve_targets(scene_file: str, scene, targets: np.ndarray, independent: boo
         else:
             result = pj.track(scene, targets, **options).waypoints
     except ValueError as err:
-        raise click.ClickException(f"{scene_file}: {err}") from None
+        raise file_error(scene_file, err) from None
     return result, time.perf_counter() - start
 
 

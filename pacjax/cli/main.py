@@ -37,6 +37,7 @@ import pacjax as pj
 
 from .. import _cache
 from .common import (
+    file_error,
     float_or_none,
     load_with_controls,
     output_dir,
@@ -199,7 +200,7 @@ def solve(scene_file: str, controls: str | None, out: str, no_plot: bool):
     try:
         eq, seconds = timed_solve(scene, u, **extra["solver"])
     except ValueError as err:
-        raise click.ClickException(f"{scene_file}: {err}") from None
+        raise file_error(scene_file, err) from None
 
     result, tip = _solve_result(scene_file, name, scene, u, eq, seconds)
     json_path = os.path.join(out, f"{name}.json")

@@ -13,7 +13,15 @@ import numpy as np
 
 import pacjax as pj
 
-from .common import load_with_controls, output_dir, parse_numbers, progress, timed_solve, write_json
+from .common import (
+    file_error,
+    load_with_controls,
+    output_dir,
+    parse_numbers,
+    progress,
+    timed_solve,
+    write_json,
+)
 
 
 # ------------------------------------------------------------------------------ simulate
@@ -92,7 +100,7 @@ def simulate(
         jax.block_until_ready(trajectory)
         seconds = time.perf_counter() - begin
     except ValueError as err:
-        raise click.ClickException(f"{scene_file}: {err}") from None
+        raise file_error(scene_file, err) from None
     ok = bool(trajectory.successful)
     tips = animation.tip_positions(scene, trajectory)
     result = {
@@ -264,7 +272,7 @@ def _batch_inputs(scene_file, n, sampler, seed, low, high, tol, use_float32):
             options["tol"] = 1e-4
         pj.SolverOptions(**{k: v for k, v in options.items() if k != "fallback"})
     except (ValueError, TypeError, OSError) as err:
-        raise click.ClickException(f"{scene_file}: {err}") from None
+        raise file_error(scene_file, err) from None
     return scene, extra, lo, hi, commands, options
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import inspect
 import math
 import tomllib
@@ -72,7 +73,9 @@ class _Table:
         self.used.add(key)
         if key not in self.data:
             if required:
-                self.fail("missing required field", key)
+                typo = difflib.get_close_matches(key, [k for k in self.data if k != key], 1, 0.75)
+                found = f" (found {typo[0]!r}: a typo?)" if typo else ""
+                self.fail(f"missing required field{found}", key)
             return _MISSING
         return self.data[key]
 
@@ -145,15 +148,17 @@ class _Table:
         unknown = sorted(set(self.data) - self.used)
         if unknown:
             allowed = ", ".join(sorted(self.used))
+            guesses = "".join(
+                f"did you mean {g!r} for {k!r}?; " for k in unknown if (g := _closest(k, self.used))
+            )
+            allowed = f"{guesses}allowed here: {allowed}"
             hint = ""
             if self.where and set(unknown) & set(_TOP_LEVEL):
                 hint = (
                     "; top-level keys such as controls or markers must come before the first "
                     "[table] of the file"
                 )
-            self.fail(
-                f"unknown key(s) {', '.join(map(repr, unknown))} (allowed here: {allowed}){hint}"
-            )
+            self.fail(f"unknown key(s) {', '.join(map(repr, unknown))} ({allowed}){hint}")
 
     def build(self, constructor, *args, **kwargs):
         """Call a pacjax constructor, re-raising its own checks with the file and table."""
@@ -165,6 +170,12 @@ class _Table:
 
 _MISSING = object()
 _TYPE_NAMES = {str: "string", int: "integer", float: "number", list: "array"}
+
+
+def _closest(key: str, allowed) -> str | None:
+    """The allowed key a typo of ``key`` most likely meant, if any is close."""
+    match = difflib.get_close_matches(key, sorted(allowed), 1, 0.75)
+    return match[0] if match else None
 
 
 def _is_number(x) -> bool:
@@ -190,9 +201,12 @@ def scene_from_toml(text: str, source: str = "<string>", default_name: str = "sc
     top = _Table(data, "", source)
     unknown = sorted(set(data) - set(_TOP_LEVEL))
     if unknown:
+        guesses = "".join(
+            f"; did you mean {g!r} for {k!r}?" for k in unknown if (g := _closest(k, _TOP_LEVEL))
+        )
         top.fail(
             f"unknown table or key(s) {', '.join(map(repr, unknown))} "
-            f"(allowed: {', '.join(_TOP_LEVEL)})"
+            f"(allowed: {', '.join(_TOP_LEVEL)}){guesses}"
         )
     name = top.string("name", default_name)
     description = top.string("description")

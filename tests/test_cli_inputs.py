@@ -1,0 +1,88 @@
+"""What the command line says about careless input, before anything is compiled: units, headers,
+typos in scene keys, missing limits named by their flags, one file name per message."""
+
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+
+from pacjax.cli.main import cli
+
+SCENES = Path(__file__).resolve().parent.parent / "experiments" / "scenes"
+TENDON_SINGLE = str(SCENES / "tendon_single.toml")
+
+
+def _run(*args):
+    return CliRunner().invoke(cli, [str(a) for a in args])
+
+
+def _line(result) -> str:
+    lines = result.output.strip().splitlines()
+    assert result.exit_code != 0 and len(lines) == 1, result.output
+    return lines[0]
+
+
+def test_targets_in_millimetres_read_as_metres_ask_about_units(tmp_path):
+    targets = tmp_path / "mm.csv"
+    targets.write_text("0,20,115\n")
+    line = _line(_run("inverse", TENDON_SINGLE, targets, "--max-tension", 5))
+    assert "116.7 m from the base" in line and "0.12 m long" in line and "--units" in line
+
+
+def test_a_header_must_name_the_columns(tmp_path):
+    targets = tmp_path / "header.csv"
+    targets.write_text("a,b,c\n0,0.02,0.115\n")
+    line = _line(_run("inverse", TENDON_SINGLE, targets, "--max-tension", 5))
+    assert "row 1 is a header other than x,y,z" in line
+
+
+def test_tension_mode_asks_for_the_cli_flag(tmp_path):
+    targets = tmp_path / "t.csv"
+    targets.write_text("X,Y,Z\n0,0.02,0.115\n")
+    line = _line(_run("inverse", TENDON_SINGLE, targets))
+    assert "--max-tension" in line and "max_tension=" not in line and "upper=" not in line
+
+
+def test_units_scale_the_targets(tmp_path):
+    import numpy as np
+
+    from pacjax.cli.data import _read_targets
+
+    path = tmp_path / "targets.csv"
+    path.write_text("x,y,z\n0,20,115\n")
+    np.testing.assert_allclose(_read_targets(str(path), "mm"), [[0.0, 0.02, 0.115]], rtol=1e-15)
+    np.testing.assert_allclose(_read_targets(str(path), "cm"), [[0.0, 0.2, 1.15]], rtol=1e-15)
+
+
+_SEGMENT = """
+[model]
+type = "PCC"
+[[segments]]
+length = 0.12
+{key} = 0.02
+axial_stiffness = 800.0
+linear_density = 0.3
+radius = 0.015
+"""
+
+
+def test_a_typo_in_a_required_key_is_named(tmp_path):
+    scene = tmp_path / "typo.toml"
+    scene.write_text(_SEGMENT.format(key="bending_stifness"))
+    line = _line(_run("solve", scene))
+    assert "bending_stiffness: missing required field (found 'bending_stifness'" in line
+
+
+def test_an_unknown_key_gets_the_closest_valid_one(tmp_path):
+    scene = tmp_path / "typo.toml"
+    scene.write_text(_SEGMENT.format(key="bending_stiffness") + "radiuss = 0.01\n")
+    line = _line(_run("solve", scene))
+    assert "did you mean 'radius' for 'radiuss'?" in line
+
+
+@pytest.mark.parametrize("command", [["solve"], ["batch", "--n", "3"], ["simulate"]], ids=str)
+def test_one_file_name_per_message(tmp_path, command):
+    scene = tmp_path / "neglen.toml"
+    scene.write_text(_SEGMENT.format(key="bending_stiffness").replace("0.12", "-0.12"))
+    line = _line(_run(*command, scene))
+    assert line.count(str(scene)) == 1 and "Segment.length must be > 0" in line
