@@ -12,7 +12,7 @@ Two evaluation paths share these rules:
 - **Knots** (points whose ``s`` is known at trace time: tendon guide rings, quadrature nodes of
   the distributed weight, markers): every segment is cut at the sorted union of its points and an
   even grid of at least 8 intervals. One Magnus step per interval gives the rotation increments,
-  chained by a short scan; the position is the cumulative sum of a 3-point Gauss-Legendre rule
+  chained by a short scan; the position is the cumulative sum of a 4-point Gauss-Legendre rule
   per interval (error ~1e-9 relative even at 2 pi of bending per segment). Each point costs about
   four exponentials whatever its ``s``, and points shared by several tendons are evaluated once.
 - **Traced points** (``s`` only known at run time): the frame at ``s`` is integrated from the
