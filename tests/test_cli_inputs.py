@@ -86,3 +86,75 @@ def test_one_file_name_per_message(tmp_path, command):
     scene.write_text(_SEGMENT.format(key="bending_stiffness").replace("0.12", "-0.12"))
     line = _line(_run(*command, scene))
     assert line.count(str(scene)) == 1 and "Segment.length must be > 0" in line
+
+
+@pytest.mark.parametrize(
+    "command, existing",
+    [
+        (["solve", "{scene}"], "guess.json"),
+        (["batch", "{scene}", "--n", "4", "--no-plot"], "guess_batch.h5"),
+        (["simulate", "{scene}"], "guess_sim.gif"),
+        (["inverse", "{scene}", "{targets}", "--max-tension", "5"], "guess_inverse.png"),
+        (["fit", "{scene}", "{frames}"], "guess_fit.md"),
+    ],
+    ids=lambda x: x[0] if isinstance(x, list) else None,
+)
+def test_outputs_are_named_after_the_input_file_and_never_replaced_without_force(
+    tmp_path, command, existing
+):
+    scene = tmp_path / "guess.toml"  # the scene inside is named "tendon_single"
+    scene.write_text(Path(TENDON_SINGLE).read_text())
+    targets = tmp_path / "targets.csv"
+    targets.write_text("0,0.02,0.115\n")
+    frames = tmp_path / "frames.csv"
+    frames.write_text("# sites = [[0, 1.0]]\nu0,u1,u2,m0_x,m0_y,m0_z\n0,0,0,0,0,0.12\n")
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / existing).write_text("an earlier run")
+    paths = {"scene": scene, "targets": targets, "frames": frames}
+    line = _line(_run(*[a.format(**paths) for a in command], "--out", out))
+    assert f"{out / existing} exists" in line and "--force" in line
+    assert (out / existing).read_text() == "an earlier run"
+    assert sorted(p.name for p in out.iterdir()) == [existing]
+
+
+def test_outputs_take_the_input_file_name_not_the_scenes(tmp_path):
+    scene = tmp_path / "guess.toml"
+    scene.write_text(Path(TENDON_SINGLE).read_text())
+    result = _run("solve", scene, "--out", tmp_path, "--no-plot")
+    assert result.exit_code == 0, result.output
+    assert (tmp_path / "guess.json").exists() and not (tmp_path / "tendon_single.json").exists()
+    again = _run("solve", scene, "--out", tmp_path, "--no-plot", "--force")
+    assert again.exit_code == 0, again.output
+
+
+@pytest.mark.slow  # a fit compiles batched solves and their Jacobians
+def test_a_fitted_scene_solves_as_the_scene_it_was_fitted_from(tmp_path):
+    """Round trip: ``pacjax fit`` with nothing to change (no iterations) writes a scene whose
+    ``pacjax solve`` is the input scene's, to the last bit, controls and all."""
+    import json
+
+    import numpy as np
+
+    import pacjax as pj
+    from pacjax.io.mocapfile import save_mocap
+    from pacjax.io.scenefile import load_scene
+
+    scene, controls, _ = load_scene(TENDON_SINGLE)
+    frames, _ = pj.synthetic_mocap(
+        scene, np.array([[1.0, 0.0, 0.0], [0.0, 2.0, 0.5]]), exact=True, noise=0.0, transform=None
+    )
+    save_mocap(tmp_path / "frames.csv", frames)
+    fit = _run(
+        "fit", TENDON_SINGLE, tmp_path / "frames.csv", "--params", "bending_stiffness",
+        "--max-iterations", 0, "--holdout", 0, "--branch-starts", 0, "--no-plot",
+        "--out", tmp_path,
+    )  # fmt: skip
+    assert fit.exit_code == 0, fit.output
+    for source in (TENDON_SINGLE, tmp_path / "tendon_single_fitted.toml"):
+        assert _run("solve", source, "--out", tmp_path, "--no-plot").exit_code == 0
+    original = json.loads((tmp_path / "tendon_single.json").read_text())
+    fitted = json.loads((tmp_path / "tendon_single_fitted.json").read_text())
+    assert fitted["controls"] == original["controls"] == list(controls)
+    assert fitted["q"] == original["q"]
+    assert fitted["tip"] == original["tip"]

@@ -74,6 +74,29 @@ def output_dir(out: str) -> str:
     return out
 
 
+#: ``--force``: the one way a command may replace files it wrote before.
+force_option = click.option(
+    "--force", is_flag=True, help="Overwrite output files that already exist."
+)
+
+
+def output_paths(out: str, input_file: str, suffixes: dict[str, str], force: bool) -> dict:
+    """``{what: path}`` of a command's output files in ``out``, each named after the input
+    file (``runs/arm.toml`` and ``"_fit.json"`` give ``OUT/arm_fit.json``), so that two inputs
+    never write the same file. Checked before anything is computed: a file that exists already
+    is a one-line error unless ``force``."""
+    out = output_dir(out)
+    stem = os.path.splitext(os.path.basename(input_file))[0]
+    paths = {what: os.path.join(out, stem + suffix) for what, suffix in suffixes.items()}
+    existing = [p for p in paths.values() if os.path.exists(p)]
+    if existing and not force:
+        more = f" (and {len(existing) - 1} more)" if len(existing) > 1 else ""
+        raise click.ClickException(
+            f"{existing[0]} exists{more}: --force overwrites, --out DIR writes elsewhere"
+        )
+    return paths
+
+
 def parse_numbers(text: str, option: str) -> list[float]:
     """Comma-separated numbers of a command-line option; a one-line user error otherwise."""
     try:

@@ -12,7 +12,7 @@ import numpy as np
 
 import pacjax as pj
 
-from .common import file_error, output_dir, solver_options
+from .common import file_error, force_option, output_paths, solver_options
 
 
 # ------------------------------------------------------------------------------ fit
@@ -77,6 +77,7 @@ def _names(text: str) -> tuple[str, ...]:
     help="Directory for the fitted scene, the report and the plots.",
 )
 @click.option("--no-plot", is_flag=True, help="Skip the figures.")
+@force_option
 def fit(
     scene_file,
     data_file,
@@ -93,11 +94,13 @@ def fit(
     seed,
     out,
     no_plot,
+    force: bool,
 ):
     """Fit a scene's parameters to static motion-capture frames (pacjax mocap CSV).
 
-    Writes <name>_fitted.toml, <name>_fit.json, <name>_fit.md and, unless --no-plot, the loss
-    curve, predicted vs measured backbones and an error histogram (PNG).
+    Writes <file>_fitted.toml, <file>_fit.json, <file>_fit.md and, unless --no-plot, the loss
+    curve, predicted vs measured backbones and an error histogram (PNG); <file> is the scene
+    file's name.
     """
     from ..io.mocapfile import load_mocap
     from ..io.scenefile import load_scene
@@ -114,6 +117,11 @@ def fit(
                 f"--holdout-frames must be comma-separated frame numbers, got {holdout_frames!r}"
             ) from None
     _reject_motive_export(data_file)
+    suffixes = {"scene": "_fitted.toml", "json": "_fit.json", "md": "_fit.md"}
+    if not no_plot:
+        suffixes |= {"loss": "_fit_loss.png", "backbones": "_fit_backbones.png"}
+        suffixes |= {"errors": "_fit_errors.png"}
+    paths = output_paths(out, scene_file, suffixes, force)
     source = click.get_current_context().get_parameter_source("holdout")
     try:
         data = load_mocap(data_file)
@@ -141,9 +149,7 @@ def fit(
     description = f"fitted to {os.path.basename(data_file)}" + (
         f"; {extra['description']}" if extra["description"] else ""
     )
-    paths = _write_fit(
-        output_dir(out), name, fitted, report, no_plot, controls, description, extra["solver"]
-    )
+    _write_fit(paths, name, fitted, report, controls, description, extra["solver"])
     _echo_fit(name, report)
     for path in paths.values():
         click.echo(f"wrote {path}")
@@ -160,19 +166,11 @@ def _reject_motive_export(data_file: str) -> None:
             )
 
 
-def _write_fit(
-    out: str, name: str, fitted, report, no_plot: bool, controls, description, solver
-) -> dict:
+def _write_fit(paths: dict, name: str, fitted, report, controls, description, solver) -> None:
     """The fitted scene (with the input scene's controls, solver options and description),
-    the report (JSON, Markdown) and, unless ``no_plot``, the figures; returns ``{what: path}``
-    in the order written."""
+    the report (JSON, Markdown) and the figures ``paths`` names."""
     from ..io.scenefile import save_scene
 
-    paths = {
-        "scene": os.path.join(out, f"{name}_fitted.toml"),
-        "json": os.path.join(out, f"{name}_fit.json"),
-        "md": os.path.join(out, f"{name}_fit.md"),
-    }
     save_scene(
         paths["scene"],
         fitted,
@@ -184,16 +182,12 @@ def _write_fit(
     report.to_json(paths["json"])
     with open(paths["md"], "w", encoding="utf-8") as f:
         f.write(report.to_markdown())
-    if not no_plot:
+    if "loss" in paths:
         from ..plots import fit as fitplots
 
-        paths["loss"] = os.path.join(out, f"{name}_fit_loss.png")
-        paths["backbones"] = os.path.join(out, f"{name}_fit_backbones.png")
-        paths["errors"] = os.path.join(out, f"{name}_fit_errors.png")
         fitplots.plot_loss(report, paths["loss"])
         fitplots.plot_backbones(fitted, report, paths["backbones"])
         fitplots.plot_error_histogram(report, paths["errors"])
-    return paths
 
 
 def _echo_fit(name: str, report) -> None:
@@ -282,7 +276,8 @@ def _check_tension_limits(scene, upper, max_tension) -> None:
     default=".",
     show_default=True,
     type=click.Path(file_okay=False),
-    help="Directory for <name>_commands.csv and <name>_inverse.png.",
+    help="Directory for <file>_commands.csv and <file>_inverse.png (<file>: the scene file's "
+    "name).",
 )
 @click.option(
     "--independent",
@@ -311,6 +306,7 @@ def _check_tension_limits(scene, upper, max_tension) -> None:
     help="Length unit of the targets file.",
 )
 @click.option("--no-plot", is_flag=True, help="Skip the figure.")
+@force_option
 def inverse(
     scene_file: str,
     targets_file: str,
@@ -321,6 +317,7 @@ def inverse(
     max_tension: float | None,
     units: str,
     no_plot: bool,
+    force: bool,
 ):
     """Tendon commands that put the tip of a TOML scene on the targets of a CSV file (x,y,z per
     row, in metres unless --units). Exits with status 3 when a target was not reached."""
@@ -333,14 +330,15 @@ def inverse(
     targets = _read_targets(targets_file, units)
     _check_reach(targets_file, scene, targets, units)
     _check_tension_limits(scene, upper, max_tension)
-    out = output_dir(out)
+    suffixes = {"csv": "_commands.csv"} | ({} if no_plot else {"png": "_inverse.png"})
+    paths = output_paths(out, scene_file, suffixes, force)
     name = extra["name"]
     options = dict(reached_tol=tol, upper=upper, max_tension=max_tension)
     options["options"] = solver_options(extra)
     result, seconds = _solve_targets(scene_file, scene, targets, independent, options)
 
     reached = np.asarray(result.reached)
-    csv_path = os.path.join(out, f"{name}_commands.csv")
+    csv_path = paths["csv"]
     _write_commands(csv_path, scene.n_tendons, targets, result)
     controls = np.asarray(result.controls)
     click.echo(
@@ -355,7 +353,7 @@ def inverse(
         click.echo(f"largest command change between neighbouring rows: {', '.join(parts)}")
     click.echo(f"wrote {csv_path}")
     if not no_plot:
-        png_path = os.path.join(out, f"{name}_inverse.png")
+        png_path = paths["png"]
         _plot_inverse(png_path, scene, name, targets, result)
         click.echo(f"wrote {png_path}")
     if not reached.all():
@@ -380,7 +378,7 @@ def _solve_targets(scene_file: str, scene, targets: np.ndarray, independent: boo
 
 
 def _write_commands(path: str, n_tendons: int, targets: np.ndarray, result) -> None:
-    """``<name>_commands.csv``: per target, whether it was reached, the error, the tip, the
+    """``<file>_commands.csv``: per target, whether it was reached, the error, the tip, the
     commands, the tensions and the iterations."""
     controls = np.asarray(result.controls)
     reached = np.asarray(result.reached)
@@ -401,7 +399,7 @@ def _write_commands(path: str, n_tendons: int, targets: np.ndarray, result) -> N
 
 
 def _plot_inverse(path: str, scene, name: str, targets: np.ndarray, result) -> None:
-    """``<name>_inverse.png``: up to six reached backbones, evenly spread over the rows, with the
+    """``<file>_inverse.png``: up to six reached backbones, evenly spread over the rows, with the
     targets and the reached tips."""
     from ..plots import equilibria as plots
 

@@ -4,16 +4,20 @@
   commands, PCC and PAC; prints a table (tip positions, PAC-PCC differences, convergence,
   timings) and writes ``demo.png``.
 - ``pacjax solve SCENE.toml [--controls u1,u2,...] [--out DIR]``: solves a scene file (see
-  :mod:`pacjax.io.scenefile`) and writes ``<name>.json`` and ``<name>.png``.
+  :mod:`pacjax.io.scenefile`) and writes ``<file>.json`` and ``<file>.png``.
 - ``pacjax inverse SCENE.toml TARGETS.csv [--out DIR]``: tendon commands that put the tip on
   each ``x,y,z`` row (m) of the CSV (a path, warm-started row to row, or ``--independent``);
-  writes ``<name>_commands.csv`` and ``<name>_inverse.png``; exit status 3 when a target was
+  writes ``<file>_commands.csv`` and ``<file>_inverse.png``; exit status 3 when a target was
   not reached.
 - ``pacjax batch SCENE.toml --n N [--sampler lhs|uniform|grid] [--out DIR]``: samples N commands,
-  solves them chunk by chunk and writes ``<name>_batch.h5``, ``<name>_batch.json`` and
-  ``<name>_workspace.png`` (see :mod:`pacjax.cli.batchrun`).
+  solves them chunk by chunk and writes ``<file>_batch.h5``, ``<file>_batch.json`` and
+  ``<file>_workspace.png`` (see :mod:`pacjax.cli.batchrun`).
 - ``pacjax bench [--batch 1,100] [--models PAC] [--dtypes float64,float32] [--json F] [--md F]``:
   equilibria per second of the paper's robot (see :mod:`pacjax.cli.bench`).
+
+Output files are named after the input file (``runs/arm.toml`` writes ``arm.json``,
+``arm_fit.json``, ...) in ``--out`` (default: the current directory); a command that would
+replace a file stops before it computes anything, unless ``--force``.
 
 Compiling a solver dominates a first run; JAX's persistent compilation cache (a folder per jaxlib
 and processor under ``~/.cache/pacjax-jax``, or ``$PACJAX_CACHE_DIR``; ``PACJAX_CACHE_DIR=off``
@@ -39,8 +43,10 @@ from .. import _cache
 from .common import (
     file_error,
     float_or_none,
+    force_option,
     load_with_controls,
     output_dir,
+    output_paths,
     progress,
     summary,
     timed_solve,
@@ -189,13 +195,15 @@ def _plot_demo(groups: dict, tips: dict, out: str, tip_mass: float) -> str:
     default=".",
     show_default=True,
     type=click.Path(file_okay=False),
-    help="Directory for <name>.json and <name>.png.",
+    help="Directory for <file>.json and <file>.png (<file>: the scene file's name).",
 )
 @click.option("--no-plot", is_flag=True, help="Skip the figure.")
-def solve(scene_file: str, controls: str | None, out: str, no_plot: bool):
+@force_option
+def solve(scene_file: str, controls: str | None, out: str, no_plot: bool, force: bool):
     """Solve the equilibrium of a TOML scene file."""
     scene, u, extra = load_with_controls(scene_file, controls)
-    out = output_dir(out)
+    suffixes = {"json": ".json"} | ({} if no_plot else {"png": ".png"})
+    paths = output_paths(out, scene_file, suffixes, force)
     name = extra["name"]
     try:
         eq, seconds = timed_solve(scene, u, **extra["solver"])
@@ -203,14 +211,14 @@ def solve(scene_file: str, controls: str | None, out: str, no_plot: bool):
         raise file_error(scene_file, err) from None
 
     result, tip = _solve_result(scene_file, name, scene, u, eq, seconds)
-    json_path = os.path.join(out, f"{name}.json")
+    json_path = paths["json"]
     write_json(json_path, result, indent=2)
     _echo_solve(name, eq, result, seconds, tip)
     click.echo(f"wrote {json_path}")
     if not no_plot:
         from ..plots import equilibria as plots
 
-        png_path = os.path.join(out, f"{name}.png")
+        png_path = paths["png"]
         label = f"{result['model']} ({'converged' if result['converged'] else 'not converged'})"
         plots.plot_equilibria(
             scene,
@@ -224,7 +232,7 @@ def solve(scene_file: str, controls: str | None, out: str, no_plot: bool):
 
 
 def _solve_result(scene_file: str, name: str, scene, u, eq, seconds: float):
-    """``(record, tip position)`` of one solve: the record is ``<name>.json``'s content; the tip
+    """``(record, tip position)`` of one solve: the record is ``<file>.json``'s content; the tip
     is returned as computed (the scene's dtype) for the printed summary."""
     (tip, rotation), marker_positions, tensions = summary(scene, eq.q, u)
     result = {

@@ -15,8 +15,9 @@ import pacjax as pj
 
 from .common import (
     file_error,
+    force_option,
     load_with_controls,
-    output_dir,
+    output_paths,
     parse_numbers,
     progress,
     timed_solve,
@@ -60,8 +61,10 @@ from .common import (
     default=".",
     show_default=True,
     type=click.Path(file_okay=False),
-    help="Directory for <name>_sim.gif, <name>_tip.png and <name>_sim.json.",
+    help="Directory for <file>_sim.gif, <file>_tip.png and <file>_sim.json (<file>: the scene "
+    "file's name).",
 )
+@force_option
 def simulate(
     scene_file: str,
     controls: str | None,
@@ -70,6 +73,7 @@ def simulate(
     damping_ratio: float,
     fps: int,
     out: str,
+    force: bool,
 ):
     """Simulate the dynamics of a TOML scene file after a step in commands."""
     import jax
@@ -77,7 +81,8 @@ def simulate(
     from ..plots import animation
 
     scene, u, extra = load_with_controls(scene_file, controls)
-    out = output_dir(out)
+    suffixes = {"json": "_sim.json", "png": "_tip.png", "gif": "_sim.gif"}
+    paths = output_paths(out, scene_file, suffixes, force)
     name = extra["name"]
     q0 = None
     if start == "equilibrium":
@@ -118,7 +123,7 @@ def simulate(
         "tip_position": tips.tolist(),
         "units": "SI: s, m, rad; wall time includes compilation",
     }
-    json_path = os.path.join(out, f"{name}_sim.json")
+    json_path = paths["json"]
     write_json(json_path, result)
     status = "reached the end" if ok else "FAILED before the end (step limit or solver failure)"
     click.echo(
@@ -129,11 +134,11 @@ def simulate(
     click.echo(f"final tip position: x {t[0]:.1f} mm, y {t[1]:.1f} mm, z {t[2]:.1f} mm")
     click.echo(f"wrote {json_path}")
     title = f"{name}: " + (extra["description"] or os.path.basename(scene_file))
-    png_path = os.path.join(out, f"{name}_tip.png")
+    png_path = paths["png"]
     animation.plot_tip_trajectory(scene, trajectory, png_path, title=title)
     click.echo(f"wrote {png_path}")
     if ok:
-        gif_path = os.path.join(out, f"{name}_sim.gif")
+        gif_path = paths["gif"]
         animation.animate_trajectory(scene, trajectory, gif_path, fps=fps, title=name)
         click.echo(f"wrote {gif_path}")
     else:
@@ -187,10 +192,14 @@ def _per_tendon(text: str | None, option: str):
     default=".",
     show_default=True,
     type=click.Path(file_okay=False),
-    help="Directory for <name>_batch.h5, <name>_batch.json and <name>_workspace.png.",
+    help="Directory for <file>_batch.h5, <file>_batch.json and <file>_workspace.png (<file>: the "
+    "scene file's name).",
 )
 @click.option("--no-plot", is_flag=True, help="Skip the workspace figure.")
-def batch(scene_file, n, sampler, seed, low, high, chunk_size, tol, use_float32, out, no_plot):
+@force_option
+def batch(
+    scene_file, n, sampler, seed, low, high, chunk_size, tol, use_float32, out, no_plot, force
+):
     """Sample N tendon commands of a TOML scene, solve them chunk by chunk and write the
     equilibria (commands, q, markers, tip pose, converged, stable, residual, steps) to an HDF5
     file as they are solved, with a workspace plot and a JSON summary."""
@@ -203,12 +212,11 @@ def batch(scene_file, n, sampler, seed, low, high, chunk_size, tol, use_float32,
     )
     if use_float32:
         scene = pj.astype(scene, jnp.float32)
-    out = output_dir(out)
+    suffixes = {"h5": "_batch.h5", "json": "_batch.json"}
+    paths = output_paths(
+        out, scene_file, suffixes | ({} if no_plot else {"png": "_workspace.png"}), force
+    )
     name = extra["name"]
-    paths = {
-        "h5": os.path.join(out, f"{name}_batch.h5"),
-        "json": os.path.join(out, f"{name}_batch.json"),
-    }
     attrs = _batch_attrs(scene_file, sampler, seed, lo, hi, use_float32, options)
     if len(commands) != n:
         click.echo(
@@ -242,9 +250,7 @@ def batch(scene_file, n, sampler, seed, low, high, chunk_size, tol, use_float32,
     for line in summary.lines():
         click.echo("  " + line)
     if not no_plot:
-        paths["png"] = batchrun.plot_workspace(
-            paths["h5"], os.path.join(out, f"{name}_workspace.png"), title=name
-        )
+        paths["png"] = batchrun.plot_workspace(paths["h5"], paths["png"], title=name)
     for path in paths.values():
         click.echo(f"wrote {path}")
 
