@@ -191,16 +191,31 @@ def chunk_columns(scene: pj.Scene, commands: np.ndarray, eq: pj.Equilibrium) -> 
 class BatchWriter:
     """An HDF5 file with one preallocated dataset per column, filled chunk by chunk.
 
-    Use as a context manager; :meth:`write` stores the rows of one chunk and flushes.
+    Use as a context manager; :meth:`write` stores the rows of one chunk. The file stays
+    readable and resumable whenever the process stops, even by ``SIGKILL``: every dataset's
+    space is allocated when the file is made (a write then changes raw data only, never the
+    file's structure), and each chunk's rows are flushed to the file before the
+    ``rows_written`` attribute that counts them, which is flushed next. ``resume=True`` opens
+    an existing file instead and continues after its ``rows_written`` rows.
     """
 
     def __init__(
-        self, path: str, scene: pj.Scene, n: int, attrs: dict | None = None, chunk_rows: int = 1024
+        self,
+        path: str,
+        scene: pj.Scene,
+        n: int,
+        attrs: dict | None = None,
+        chunk_rows: int = 1024,
+        resume: bool = False,
     ):
         import h5py
 
         self.path = path
         self.n = n
+        if resume:
+            self.file = h5py.File(path, "r+")
+            self.rows_written = int(self.file.attrs["rows_written"])
+            return
         self.file = h5py.File(path, "w")
         dtype = np.dtype(jnp.asarray(scene.robot.segments[0].length).dtype)
         rows = max(1, min(chunk_rows, n))
@@ -218,7 +233,11 @@ class BatchWriter:
         if scene.markers:
             shapes["markers"] = ((len(scene.markers), 3), dtype)
         for name, (shape, dt) in shapes.items():
-            self.file.create_dataset(name, (n, *shape), dtype=dt, chunks=(rows, *shape))
+            dcpl = h5py.h5p.create(h5py.h5p.DATASET_CREATE)
+            dcpl.set_alloc_time(h5py.h5d.ALLOC_TIME_EARLY)
+            self.file.create_dataset(
+                name, (n, *shape), dtype=dt, chunks=(rows, *shape), fillvalue=0, dcpl=dcpl
+            )
         self.file["q"].attrs["names"] = list(scene.coordinate_names())
         if scene.markers:
             self.file["markers"].attrs["sites"] = np.asarray(
@@ -228,11 +247,13 @@ class BatchWriter:
             self.file.attrs[key] = value
         self.file.attrs["rows_written"] = 0
         self.file.attrs["pacjax_version"] = pj.__version__
+        self.file.flush()
         self.rows_written = 0
 
     def write(self, rows: slice, columns: dict) -> None:
         for name, values in columns.items():
             self.file[name][rows] = values
+        self.file.flush()  # the rows first, then the count that makes them part of the file
         self.rows_written = max(self.rows_written, rows.stop)
         self.file.attrs["rows_written"] = self.rows_written
         self.file.flush()
@@ -276,6 +297,8 @@ class BatchSummary:
     #: Peak memory in use on the accelerator(s), the largest over the local devices (MiB);
     #: None where the backend does not report it (the CPU).
     peak_device_memory_mib: float | None = None
+    #: Rows an interrupted run had written to the file before this one resumed it.
+    resumed_rows: int = 0
 
     @property
     def converged_fraction(self) -> float:
@@ -283,14 +306,14 @@ class BatchSummary:
 
     @property
     def equilibria_per_s(self) -> float:
-        """All rows over the whole wall time (compilation included)."""
-        return self.n / self.wall_s
+        """The rows solved in this run over its whole wall time (compilation included)."""
+        return (self.n - self.resumed_rows) / self.wall_s
 
     @property
     def warm_equilibria_per_s(self) -> float | None:
         """Rows after the first chunk over their wall time (None with a single chunk)."""
         rest = self.wall_s - self.first_chunk_s
-        rows = self.n - min(self.chunk_size, self.n)
+        rows = self.n - self.resumed_rows - min(self.chunk_size, self.n)
         return rows / rest if rows > 0 and rest > 0 else None
 
     def as_dict(self) -> dict:
@@ -304,8 +327,11 @@ class BatchSummary:
 
     def lines(self) -> list[str]:
         warm = self.warm_equilibria_per_s
+        resumed = (
+            f" ({self.resumed_rows} of them from the run resumed)" if self.resumed_rows else ""
+        )
         return [
-            f"n = {self.n}, converged {self.converged} ({self.converged_fraction:.2%}), "
+            f"n = {self.n}{resumed}, converged {self.converged} ({self.converged_fraction:.2%}), "
             f"stable {self.stable}",
             f"wall {self.wall_s:.2f} s ({self.chunks} chunk(s) of {self.chunk_size}); first chunk "
             f"{self.first_chunk_s:.2f} s (compilation included)",
@@ -346,6 +372,7 @@ def run_batch(
     chunk_size: int = 1024,
     attrs: dict | None = None,
     on_chunk: Callable[[int], None] | None = None,
+    resume: bool = False,
     **solver_options,
 ) -> BatchSummary:
     """Solve every row of ``commands`` with :func:`pacjax.iter_batch` and write each chunk to
@@ -353,6 +380,11 @@ def run_batch(
 
     ``on_chunk(rows_done)`` is called after each chunk (a progress bar). ``solver_options``
     go to the solver (``tol``, ``max_steps``, ``warm_start``, ``fallback``, ...).
+
+    ``resume=True`` continues a file that an interrupted run with the same ``commands`` and
+    ``chunk_size`` left: its first ``rows_written`` rows are kept (and counted in the summary),
+    and the rest are solved in the same chunks as an uninterrupted run would have solved them,
+    so the file ends the same. Raises :class:`ValueError` when the file holds other commands.
     """
     commands = np.asarray(commands, float)
     if commands.ndim != 2 or commands.shape[1] != scene.n_tendons:
@@ -363,21 +395,24 @@ def run_batch(
         raise ValueError(f"chunk_size must be >= 1, got {chunk_size}")
     n = commands.shape[0]
     chunk = min(chunk_size, n)
-    converged = stable = chunks = 0
-    max_res = 0.0
+    tally = _Tally()
     first = None
     start = time.perf_counter()
-    parts = pj.iter_batch(scene, commands, chunk_size=chunk, **solver_options)
-    with BatchWriter(path, scene, n, attrs, chunk_rows=chunk) as writer:
-        for rows, eq in parts:
+    with BatchWriter(path, scene, n, attrs, chunk_rows=chunk, resume=resume) as writer:
+        done = writer.rows_written
+        if resume:
+            _check_resumable(writer.file, commands, chunk)
+            tally.add({name: writer.file[name][:done] for name in _TALLIED})
+            if on_chunk is not None and done:
+                on_chunk(done)
+        rest = commands[done:]
+        parts = pj.iter_batch(scene, rest, chunk_size=chunk, **solver_options) if len(rest) else ()
+        for part, eq in parts:
+            rows = slice(part.start + done, part.stop + done)
             cols = chunk_columns(scene, commands[rows], eq)
             writer.write(rows, cols)
-            ok = cols["converged"]
-            converged += int(ok.sum())
-            stable += int((ok & cols["stable"]).sum())
-            if ok.any():
-                max_res = max(max_res, float(cols["residual_norm"][ok].max()))
-            chunks += 1
+            tally.add(cols)
+            tally.chunks += 1
             if first is None:
                 first = time.perf_counter() - start
             if on_chunk is not None:
@@ -385,16 +420,52 @@ def run_batch(
     wall = time.perf_counter() - start
     return BatchSummary(
         n=n,
-        converged=converged,
-        stable=stable,
+        converged=tally.converged,
+        stable=tally.stable,
         wall_s=wall,
-        first_chunk_s=first,
-        chunks=chunks,
+        first_chunk_s=wall if first is None else first,
+        chunks=tally.chunks,
         chunk_size=chunk,
         peak_memory_mib=peak_memory_mib(),
-        max_residual_converged=max_res,
+        max_residual_converged=tally.max_residual,
         peak_device_memory_mib=peak_device_memory_mib(),
+        resumed_rows=done,
     )
+
+
+_TALLIED = ("converged", "stable", "residual_norm")
+
+
+@dataclasses.dataclass
+class _Tally:
+    """Running counts of a batch's rows for its summary."""
+
+    converged: int = 0
+    stable: int = 0
+    max_residual: float = 0.0
+    chunks: int = 0
+
+    def add(self, columns: dict) -> None:
+        ok = np.asarray(columns["converged"], bool)
+        self.converged += int(ok.sum())
+        self.stable += int((ok & np.asarray(columns["stable"], bool)).sum())
+        if ok.any():
+            self.max_residual = max(self.max_residual, float(columns["residual_norm"][ok].max()))
+
+
+def _check_resumable(file, commands: np.ndarray, chunk: int) -> None:
+    """The file was written for these commands in chunks of ``chunk`` rows."""
+    done = int(file.attrs["rows_written"])
+    if file["commands"].shape != commands.shape:
+        raise ValueError(
+            f"{file.filename} holds {file['commands'].shape[0]} rows of "
+            f"{file['commands'].shape[1]} commands, not {commands.shape[0]} of {commands.shape[1]}"
+        )
+    stored = min(int(file.attrs.get("chunk_size", chunk)), commands.shape[0])
+    if stored != chunk:  # other chunks would give other rounding in the rows still to solve
+        raise ValueError(f"{file.filename} was written in chunks of {stored} rows, not {chunk}")
+    if not np.array_equal(file["commands"][:done], commands[:done]):
+        raise ValueError(f"{file.filename} was solved for other commands than these")
 
 
 # ------------------------------------------------------------------------------ plot

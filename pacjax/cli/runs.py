@@ -157,8 +157,8 @@ def _per_tendon(text: str | None, option: str):
 
 
 @click.command()
-@click.argument("scene_file", type=click.Path(exists=True, dir_okay=False))
-@click.option("--n", "n", required=True, type=click.IntRange(min=1), help="Number of commands.")
+@click.argument("scene_file", required=False, type=click.Path(exists=True, dir_okay=False))
+@click.option("--n", "n", type=click.IntRange(min=1), help="Number of commands.")
 @click.option(
     "--sampler",
     type=click.Choice(["uniform", "lhs", "grid"]),
@@ -197,28 +197,60 @@ def _per_tendon(text: str | None, option: str):
 )
 @click.option("--no-plot", is_flag=True, help="Skip the workspace figure.")
 @force_option
+@click.option(
+    "--resume",
+    type=click.Path(exists=True, dir_okay=False),
+    help="Continue the interrupted run that wrote this HDF5 file, with the settings stored in it "
+    "(the rows it holds are kept, the others solved).",
+)
 def batch(
-    scene_file, n, sampler, seed, low, high, chunk_size, tol, use_float32, out, no_plot, force
+    scene_file,
+    n,
+    sampler,
+    seed,
+    low,
+    high,
+    chunk_size,
+    tol,
+    use_float32,
+    out,
+    no_plot,
+    force,
+    resume,
 ):
     """Sample N tendon commands of a TOML scene, solve them chunk by chunk and write the
     equilibria (commands, q, markers, tip pose, converged, stable, residual, steps) to an HDF5
-    file as they are solved, with a workspace plot and a JSON summary."""
+    file as they are solved, with a workspace plot and a JSON summary. An interrupted run
+    continues with `pacjax batch --resume FILE.h5`."""
     import jax.numpy as jnp
 
     from . import batchrun
 
-    scene, extra, lo, hi, commands, options = _batch_inputs(
-        scene_file, n, sampler, seed, low, high, tol, use_float32
-    )
+    if resume is None:
+        if scene_file is None or n is None:
+            raise click.UsageError("give SCENE_FILE and --n (or --resume FILE.h5)")
+        scene, extra, lo, hi, commands, options = _batch_inputs(
+            scene_file, n, sampler, seed, low, high, tol, use_float32
+        )
+        suffixes = {"h5": "_batch.h5", "json": "_batch.json"}
+        paths = output_paths(
+            out, scene_file, suffixes | ({} if no_plot else {"png": "_workspace.png"}), force
+        )
+        attrs = _batch_attrs(scene_file, sampler, seed, lo, hi, use_float32, options)
+        attrs |= {"n": n, "chunk_size": chunk_size}
+    else:
+        scene, extra, commands, options, attrs = _resumed_inputs(resume, scene_file)
+        sampler, use_float32 = attrs["sampler"], attrs["dtype"] == "float32"
+        lo, hi = np.asarray(attrs["low"]), np.asarray(attrs["high"])
+        chunk_size = int(attrs["chunk_size"])
+        stem = resume[: -len("_batch.h5")] if resume.endswith("_batch.h5") else resume[:-3]
+        paths = {"h5": resume, "json": f"{stem}_batch.json"}
+        if not no_plot:
+            paths["png"] = f"{stem}_workspace.png"
     if use_float32:
         scene = pj.astype(scene, jnp.float32)
-    suffixes = {"h5": "_batch.h5", "json": "_batch.json"}
-    paths = output_paths(
-        out, scene_file, suffixes | ({} if no_plot else {"png": "_workspace.png"}), force
-    )
     name = extra["name"]
-    attrs = _batch_attrs(scene_file, sampler, seed, lo, hi, use_float32, options)
-    if len(commands) != n:
+    if len(commands) != attrs["n"] and resume is None:
         click.echo(
             f"grid: {round(len(commands) ** (1 / scene.n_tendons))} values per tendon, "
             f"{len(commands)} rows"
@@ -233,13 +265,18 @@ def batch(
             chunk_size=chunk_size,
             attrs=attrs,
             on_chunk=bar.update,
+            resume=resume is not None,
             **options,
         )
     report = {
-        "scene": os.path.abspath(scene_file),
+        "scene": os.path.abspath(scene_file) if scene_file else None,
         "name": name,
         "model": type(scene.model).__name__,
-        **{k: v for k, v in attrs.items() if k != "scene_toml"},
+        **{
+            k: _plain(v)
+            for k, v in attrs.items()
+            if k not in ("scene_toml", "low", "high", "rows_written")
+        },
         "low": lo.tolist(),
         "high": hi.tolist(),
         **summary.as_dict(),
@@ -253,6 +290,66 @@ def batch(
         paths["png"] = batchrun.plot_workspace(paths["h5"], paths["png"], title=name)
     for path in paths.values():
         click.echo(f"wrote {path}")
+
+
+def _plain(value):
+    """A JSON value of an HDF5 attribute (numpy scalars and arrays as Python ones)."""
+    return value.tolist() if isinstance(value, np.ndarray | np.generic) else value
+
+
+#: The options that choose a batch's commands and solver: a resumed run takes them from its file.
+_RUN_SETTINGS = ("n", "sampler", "seed", "low", "high", "chunk_size", "tol", "use_float32")
+
+
+def _resumed_inputs(path: str, scene_file: str | None):
+    """``(scene, extra, commands, solver options, attrs)`` of the run that wrote the batch file
+    ``path``, rebuilt from the settings stored in it (the scene file's text, the sampler and its
+    seed, the ranges, the precision and tolerance); one-line errors for a file that cannot be
+    resumed or options that would change the run."""
+    import h5py
+
+    from ..io.scenefile import scene_from_toml
+    from . import batchrun
+
+    context = click.get_current_context()
+    given = [
+        "--" + name.replace("use_", "").replace("_", "-")
+        for name in _RUN_SETTINGS
+        if context.get_parameter_source(name) != click.core.ParameterSource.DEFAULT
+    ]
+    if given:
+        raise click.UsageError(
+            f"--resume continues the run with the settings stored in {path}: "
+            f"drop {', '.join(given)}"
+        )
+    try:
+        with h5py.File(path, "r") as f:
+            attrs = dict(f.attrs)
+    except OSError as err:
+        raise click.ClickException(f"{path}: not a readable batch file ({err})") from None
+    missing = [k for k in ("scene_toml", "n", "chunk_size", "rows_written") if k not in attrs]
+    if missing:
+        raise click.ClickException(
+            f"{path}: cannot be resumed: no {', '.join(missing)} (written by another version, "
+            "or not by pacjax batch)"
+        )
+    text = str(attrs["scene_toml"])
+    if scene_file is not None:
+        with open(scene_file, encoding="utf-8") as f:
+            if f.read() != text:
+                raise click.ClickException(
+                    f"{scene_file} is not the scene {path} was solved for (leave it out to use "
+                    "the file's copy)"
+                )
+    try:
+        scene, _, extra = scene_from_toml(text, source=f"{path} (its scene)")
+        commands = batchrun.sample_commands(
+            str(attrs["sampler"]), int(attrs["n"]), attrs["low"], attrs["high"], int(attrs["seed"])
+        )
+    except (ValueError, TypeError) as err:
+        raise click.ClickException(str(err)) from None
+    options = dict(extra["solver"]) | {"tol": float(attrs["tol"])}
+    return scene, extra, commands, options, attrs
 
 
 def _batch_inputs(scene_file, n, sampler, seed, low, high, tol, use_float32):
