@@ -158,3 +158,48 @@ def test_a_fitted_scene_solves_as_the_scene_it_was_fitted_from(tmp_path):
     assert fitted["controls"] == original["controls"] == list(controls)
     assert fitted["q"] == original["q"]
     assert fitted["tip"] == original["tip"]
+
+
+def test_progress_in_a_log_is_a_line_every_interval():
+    import io
+
+    from pacjax.cli.common import Progress
+
+    log = io.StringIO()
+    with Progress(1000, "batch", interval=0.0, file=log) as bar:
+        bar.update(0)
+        bar.update(250)
+    lines = log.getvalue().splitlines()
+    assert lines[0] == "batch: 0/1000 eq"
+    assert lines[1].startswith("batch: 250/1000 eq (25 %), ") and lines[1].endswith(" left")
+    assert " eq/s, " in lines[1]
+
+
+def test_progress_on_a_terminal_is_a_bar_with_one_unit():
+    import io
+
+    from pacjax.cli.common import Progress
+
+    class Terminal(io.StringIO):
+        def isatty(self):
+            return True
+
+    screen = Terminal()
+    with Progress(10, "batch", file=screen) as bar:
+        bar.update(3)
+    assert bar.bar is not None and bar.bar.unit == "eq" and bar.bar.n == 3
+    assert "batch" in screen.getvalue()
+
+
+def test_the_batch_reports_rows_as_they_leave_the_pool():
+    import numpy as np
+
+    import pacjax as pj
+    from pacjax.io.scenefile import load_scene
+
+    scene, _, _ = load_scene(TENDON_SINGLE)
+    commands = np.random.default_rng(0).uniform(0.0, 4.0, (300, 3))
+    counts = []
+    chunks = list(pj.iter_batch(scene, commands, chunk_size=300, on_rows=counts.append))
+    assert len(chunks) == 1 and sum(counts) == 300
+    assert len(counts) > 2  # several times within the one chunk

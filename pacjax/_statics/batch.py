@@ -81,12 +81,15 @@ def iter_batch(
     devices: int | None = None,
     fallback: bool = True,
     options: SolverOptions | None = None,
+    on_rows: Callable[[int], None] | None = None,
     **overrides,
 ) -> Iterator[tuple[slice, Equilibrium]]:
     """Solve a batch chunk by chunk, yielding ``(rows, Equilibrium)`` as each chunk finishes.
 
     Memory stays bounded by the chunk size whatever the batch size: write each chunk out and
-    drop it. Arguments as :func:`solve_batch`.
+    drop it. Arguments as :func:`solve_batch`; ``on_rows(count)``, if given, is called as rows
+    leave the solver's slot pool (which finishes rows in any order, several times per chunk):
+    for a progress display that moves row by row.
     """
     check_scene(scene)
     _check_not_traced(scene, controls_batch, q0, params)
@@ -114,7 +117,7 @@ def iter_batch(
         scene, controls_batch, starts, params, update, opts, slots, chunk, dtype, sharding, lanes
     )
     retry = (fallback or not scene.is_conservative) and opts.method == "ptc"
-    for part in _chunks_in_order(pool, starts, controls_batch, chunk):
+    for part in _chunks_in_order(pool, starts, controls_batch, chunk, on_rows):
         eq = jtu.tree_map(jnp.asarray, part.eq)
         if retry and not np.all(part.eq.converged):
             u = controls_batch[part.rows]
@@ -156,7 +159,9 @@ def _check_devices(devices: int | None) -> int:
     return n_devices
 
 
-def _chunks_in_order(pool, starts, controls_batch, chunk: int) -> Iterator["_ChunkBuffer"]:
+def _chunks_in_order(
+    pool, starts, controls_batch, chunk: int, on_rows=None
+) -> Iterator["_ChunkBuffer"]:
     """The output chunks, in order, each as soon as all its rows have come out of the pool
     (which finishes rows in any order); warm starts learn from every finished row."""
     n = controls_batch.shape[0]
@@ -164,6 +169,8 @@ def _chunks_in_order(pool, starts, controls_batch, chunk: int) -> Iterator["_Chu
     next_chunk = 0
     for rows, q_start, eq_rows in pool:
         starts.record(controls_batch[rows], eq_rows)
+        if on_rows is not None:
+            on_rows(len(rows))
         for c in (int(k) for k in np.unique(rows // chunk)):
             if c not in buffers:
                 lo = c * chunk
@@ -296,6 +303,12 @@ def solve_batch(
         **overrides: single :class:`SolverOptions` fields replaced in ``options`` (``tol``,
             ``max_steps``, ...); an unknown name raises a TypeError.
     """
+    n = np.shape(controls_batch)[0] if np.ndim(controls_batch) == 2 else 0
+    bar = None
+    if progress if progress is not None else n > chunk_size:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=n, unit="eq", desc="equilibria")
     parts = iter_batch(
         scene,
         controls_batch,
@@ -307,19 +320,12 @@ def solve_batch(
         devices=devices,
         fallback=fallback,
         options=options,
+        on_rows=None if bar is None else bar.update,
         **overrides,
     )
-    n = np.shape(controls_batch)[0] if np.ndim(controls_batch) == 2 else 0
-    show = progress if progress is not None else n > chunk_size
-    if show:
-        from tqdm.auto import tqdm
-
-        bar = tqdm(total=n, unit="eq", desc="equilibria")
-    results = []
-    for rows, eq in parts:
-        results.append(jtu.tree_map(np.asarray, eq))
-        if show:
-            bar.update(rows.stop - rows.start)
-    if show:
-        bar.close()
+    try:
+        results = [jtu.tree_map(np.asarray, eq) for _, eq in parts]
+    finally:
+        if bar is not None:
+            bar.close()
     return jtu.tree_map(lambda *xs: jnp.asarray(np.concatenate(xs)), *results)

@@ -372,13 +372,15 @@ def run_batch(
     chunk_size: int = 1024,
     attrs: dict | None = None,
     on_chunk: Callable[[int], None] | None = None,
+    on_rows: Callable[[int], None] | None = None,
     resume: bool = False,
     **solver_options,
 ) -> BatchSummary:
     """Solve every row of ``commands`` with :func:`pacjax.iter_batch` and write each chunk to
     the HDF5 file ``path`` as it finishes (see the module doc for the columns).
 
-    ``on_chunk(rows_done)`` is called after each chunk (a progress bar). ``solver_options``
+    ``on_chunk(rows)`` is called after each chunk is written, ``on_rows(rows)`` as rows leave
+    the solver's slot pool (a progress bar that moves row by row). ``solver_options``
     go to the solver (``tol``, ``max_steps``, ``warm_start``, ``fallback``, ...).
 
     ``resume=True`` continues a file that an interrupted run with the same ``commands`` and
@@ -403,10 +405,15 @@ def run_batch(
         if resume:
             _check_resumable(writer.file, commands, chunk)
             tally.add({name: writer.file[name][:done] for name in _TALLIED})
-            if on_chunk is not None and done:
-                on_chunk(done)
+            for callback in (on_chunk, on_rows):
+                if callback is not None and done:
+                    callback(done)
         rest = commands[done:]
-        parts = pj.iter_batch(scene, rest, chunk_size=chunk, **solver_options) if len(rest) else ()
+        parts = (
+            pj.iter_batch(scene, rest, chunk_size=chunk, on_rows=on_rows, **solver_options)
+            if len(rest)
+            else ()
+        )
         for part, eq in parts:
             rows = slice(part.start + done, part.stop + done)
             cols = chunk_columns(scene, commands[rows], eq)

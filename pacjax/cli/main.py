@@ -107,7 +107,7 @@ def _solve_demo(tip_mass: float):
     rows = []
     compile_s = {}
     groups: dict[str, dict] = {name: {} for name in DEMO_COMMANDS}
-    bar = progress(2 * len(DEMO_COMMANDS) * len(DEMO_MODELS), "demo")
+    bar = progress(2 * len(DEMO_COMMANDS) * len(DEMO_MODELS), "demo", unit="solve")
     with bar:
         for model_name in DEMO_MODELS:
             scene = pj.presets.stella2023(getattr(pj, model_name)(), tip_mass=tip_mass)

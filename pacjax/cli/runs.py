@@ -257,14 +257,13 @@ def batch(
         )
     bar = progress(len(commands), "batch")
     with bar:
-        bar.unit = "eq"
         summary = batchrun.run_batch(
             scene,
             commands,
             paths["h5"],
             chunk_size=chunk_size,
             attrs=attrs,
-            on_chunk=bar.update,
+            on_rows=bar.update,
             resume=resume is not None,
             **options,
         )
