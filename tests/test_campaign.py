@@ -77,7 +77,7 @@ def _draw_and_check(name, data):
 
 
 @pytest.mark.parametrize("name", DEFAULT_STEP)
-@_settings(150)
+@_settings(100)
 @given(data=st.data())
 def test_every_draw_solves_or_says_why(name, data):
     _draw_and_check(name, data)
