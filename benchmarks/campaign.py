@@ -4,18 +4,27 @@ can write (``tests/scene_space.py``: 1-24 segments, every strain model and per-s
 anchors anywhere, length and tension mode, gravity and base in any direction, float32 and
 float64), many value draws on each, every property checked on each draw.
 
-Each structure costs its compilations (tens of seconds on 2 cores); its draws reuse them. Every
-draw is recorded (structure, result code, any broken property or exception with its
-traceback's last line) in ``benchmarks/results/campaign.json``, rewritten after every structure
-so that an interrupted run keeps what it did; ``--resume`` continues one.
+Each structure costs its compilations (tens of seconds on 2 cores); its draws reuse them, so
+programs are compiled at LLVM's optimisation level 0 (the campaign checks properties, not
+speed; ``XLA_FLAGS`` setting a level stands). Every draw is recorded (structure, result code,
+any broken property or exception with its traceback's last line) in
+``benchmarks/results/campaign.json``, rewritten after every draw so that an interrupted run keeps
+what it did; ``--resume`` continues one at its next structure, and ``--minutes`` stops a run
+after its last structure that started within that time.
 
-    python benchmarks/campaign.py --structures 200 --draws 50 [--seed 0] [--resume]
+    python benchmarks/campaign.py --structures 200 --draws 50 [--seed 0] [--resume] [--minutes M]
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
+
+if "--xla_backend_optimization_level" not in os.environ.get("XLA_FLAGS", ""):
+    os.environ["XLA_FLAGS"] = " ".join(
+        filter(None, [os.environ.get("XLA_FLAGS"), "--xla_backend_optimization_level=0"])
+    )
 import subprocess
 import sys
 import time
@@ -37,8 +46,9 @@ OUT = ROOT / "benchmarks" / "results" / "campaign.json"
 OPERATIONS = ("gradient", "find_equilibria", "simulate")
 
 
-def run_structure(structure, draws: int, seed: int) -> list[dict]:
-    """``draws`` value draws on one structure; one record per draw."""
+def run_structure(structure, draws: int, seed: int, on_draw=lambda record: None) -> list[dict]:
+    """``draws`` value draws on one structure; one record per draw, each also passed to
+    ``on_draw`` as soon as it is made."""
     records = []
 
     @settings(
@@ -67,39 +77,57 @@ def run_structure(structure, draws: int, seed: int) -> list[dict]:
                 record.update(outcome="crash", error=f"{type(err).__name__}: {last}")
         record["seconds"] = time.perf_counter() - t0
         records.append(record)
+        on_draw(record)
 
     np.random.seed(seed)  # hypothesis seeds from its own generator; keep numpy's fixed too
     one()
     return records
 
 
-def main(n_structures: int, draws: int, seed: int, resume: bool) -> dict:
+def main(n_structures: int, draws: int, seed: int, resume: bool, minutes: float | None) -> dict:
     warnings.simplefilter("ignore")
     rng = np.random.default_rng(seed)
     done = json.loads(OUT.read_text()) if resume and OUT.exists() else None
     records = done["records"] if done else []
     start = done["structures_done"] if done else 0
+    records = [r for r in records if r.get("structure_index", 0) < start]
     structures = [draw_structure(rng) for _ in range(n_structures)]
     commit = subprocess.run(
         ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, cwd=ROOT
     ).stdout.strip()
     t0 = time.perf_counter()
-    for k in range(start, n_structures):
-        records += run_structure(structures[k], draws, seed + k)
-        tally = Counter(r["outcome"] for r in records)
+    previous_wall = (done or {}).get("wall_s", 0.0)
+
+    def save(structures_done: int) -> dict:
         result = {
             "commit": commit,
             "date": time.strftime("%Y-%m-%d"),
             "seed": seed,
-            "structures_done": k + 1,
+            "structures_planned": n_structures,
+            "draws_per_structure": draws,
+            "structures_done": structures_done,
             "draws": len(records),
-            "tally": dict(tally),
+            "tally": dict(Counter(r["outcome"] for r in records)),
             "results": dict(Counter(r.get("single", "-") for r in records)),
-            "wall_s": (done or {}).get("wall_s", 0.0) + time.perf_counter() - t0,
+            "wall_s": previous_wall + time.perf_counter() - t0,
             "records": records,
         }
         OUT.write_text(json.dumps(result, indent=1) + "\n")
-        print(f"{k + 1}/{n_structures} {structures[k].describe()}: {dict(tally)}", flush=True)
+        return result
+
+    result = save(start)
+    for k in range(start, n_structures):
+        if minutes is not None and time.perf_counter() - t0 > 60 * minutes:
+            break
+
+        def on_draw(record, k=k):
+            record["structure_index"] = k
+            records.append(record)
+            save(k)
+
+        run_structure(structures[k], draws, seed + k, on_draw)
+        result = save(k + 1)
+        print(f"{k + 1}/{n_structures} {structures[k].describe()}: {result['tally']}", flush=True)
     return result
 
 
@@ -109,5 +137,6 @@ if __name__ == "__main__":
     parser.add_argument("--draws", type=int, default=50)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--resume", action="store_true")
+    parser.add_argument("--minutes", type=float, help="start no structure after this time")
     args = parser.parse_args()
-    main(args.structures, args.draws, args.seed, args.resume)
+    main(args.structures, args.draws, args.seed, args.resume, args.minutes)
