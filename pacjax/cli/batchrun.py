@@ -478,46 +478,16 @@ def _check_resumable(file, commands: np.ndarray, chunk: int) -> None:
 # ------------------------------------------------------------------------------ plot
 def plot_workspace(path: str, png: str, max_points: int = 50_000, title: str | None = None):
     """Tip positions of a batch file in three views (x-y, x-z, y-z, mm), converged rows in blue
-    and the others as red crosses. At most ``max_points`` evenly strided rows are drawn."""
+    and the others as red crosses (:func:`pacjax.plots.batch.plot_workspace`). At most
+    ``max_points`` evenly strided rows are drawn."""
     import h5py
-    import matplotlib
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from ..plots.batch import plot_workspace as draw
 
     with h5py.File(path, "r") as f:
         n = int(f.attrs["rows_written"])
         step = max(1, -(-n // max_points))
-        tip = 1e3 * f["tip_position"][:n:step]
+        tip = f["tip_position"][:n:step]
         ok = f["converged"][:n:step]
-    fig, axes = plt.subplots(1, 3, figsize=(15, 5), constrained_layout=True)
-    size = 4 if len(tip) > 2000 else 12
-    for ax, (i, j) in zip(axes, ((0, 1), (0, 2), (1, 2)), strict=True):
-        ax.scatter(
-            tip[ok, i],
-            tip[ok, j],
-            s=size,
-            c="tab:blue",
-            alpha=0.5,
-            lw=0,
-            label=f"converged ({int(ok.sum())})",
-        )
-        if (~ok).any():
-            ax.scatter(
-                tip[~ok, i],
-                tip[~ok, j],
-                s=3 * size,
-                c="tab:red",
-                marker="x",
-                label=f"not converged ({int((~ok).sum())})",
-            )
-        ax.set_xlabel(f"{'xyz'[i]} (mm)")
-        ax.set_ylabel(f"{'xyz'[j]} (mm)")
-        ax.set_aspect("equal", adjustable="datalim")
-        ax.grid(alpha=0.3)
-    axes[0].legend(loc="best", fontsize=8)
-    shown = f"{len(tip)} of {n} rows" if step > 1 else f"{n} rows"
-    fig.suptitle((title + ": " if title else "") + f"tip workspace ({shown})")
-    fig.savefig(png, dpi=120)
-    plt.close(fig)
+    draw(tip, ok, png, title=title, n_rows=n)
     return png

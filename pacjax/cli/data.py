@@ -399,13 +399,14 @@ def _write_commands(path: str, n_tendons: int, targets: np.ndarray, result) -> N
 
 
 def _plot_inverse(path: str, scene, name: str, targets: np.ndarray, result) -> None:
-    """``<file>_inverse.png``: up to six reached backbones, evenly spread over the rows, with the
-    targets and the reached tips."""
+    """``<file>_inverse.png``: up to six reached backbones, evenly spread over the rows, their
+    tendons shaded by tension, with the targets and the reached tips."""
     from ..plots import equilibria as plots
 
     reached = np.asarray(result.reached)
     shown = np.unique(np.linspace(0, len(targets) - 1, min(len(targets), 6)).astype(int))
-    cases = {f"target {i + 1}": np.asarray(result.q[i]) for i in shown}
+    controls = np.asarray(result.controls)
+    cases = {f"target {i + 1}": (scene, np.asarray(result.q[i]), controls[i]) for i in shown}
     plots.plot_equilibria(
         scene,
         cases,

@@ -103,7 +103,7 @@ def demo(out: str, tip_mass: float):
 def _solve_demo(tip_mass: float):
     """Every demo command with every model, each solved twice (the second, already compiled,
     times the solve alone); returns the table's rows ``(command, model, tip, eq, warm s)``, each
-    model's compile time and ``{command: {model: (scene, q)}}`` for the figure."""
+    model's compile time and ``{command: {model: (scene, q, controls)}}`` for the figure."""
     rows = []
     compile_s = {}
     groups: dict[str, dict] = {name: {} for name in DEMO_COMMANDS}
@@ -123,7 +123,7 @@ def _solve_demo(tip_mass: float):
                     compile_s[model_name] = max(first - warm, 0.0)
                 (tip, _), _, _ = summary(scene, eq.q, np.asarray(controls))
                 rows.append((command, model_name, np.asarray(tip), eq, warm))
-                groups[command][model_name] = (scene, eq.q)
+                groups[command][model_name] = (scene, eq.q, np.asarray(controls))
     return rows, compile_s, groups
 
 
@@ -225,6 +225,7 @@ def solve(scene_file: str, controls: str | None, out: str, no_plot: bool, force:
             {label: eq.q},
             png_path,
             title=f"{name}: " + (extra["description"] or os.path.basename(scene_file)),
+            controls=u,
         )
         click.echo(f"wrote {png_path}")
     if not result["converged"]:

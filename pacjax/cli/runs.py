@@ -101,6 +101,7 @@ def simulate(
             q0=q0,
             saveat=np.linspace(0.0, duration, n_frames),
             damping=damping,
+            dense=True,  # the tip plot's curve, at any --fps
         )
         jax.block_until_ready(trajectory)
         seconds = time.perf_counter() - begin
@@ -135,7 +136,9 @@ def simulate(
     click.echo(f"wrote {json_path}")
     title = f"{name}: " + (extra["description"] or os.path.basename(scene_file))
     png_path = paths["png"]
-    animation.plot_tip_trajectory(scene, trajectory, png_path, title=title)
+    animation.plot_tip_trajectory(
+        scene, trajectory, png_path, title=title, equilibrium=_settled(scene, u, extra)
+    )
     click.echo(f"wrote {png_path}")
     if ok:
         gif_path = paths["gif"]
@@ -143,6 +146,16 @@ def simulate(
         click.echo(f"wrote {gif_path}")
     else:
         sys.exit(3)
+
+
+def _settled(scene, u, extra):
+    """The static equilibrium under the simulated commands (where a damped motion ends), for
+    the tip plot; None when it does not converge."""
+    try:
+        eq, _ = timed_solve(scene, u, **extra["solver"])
+    except ValueError:
+        return None
+    return eq if bool(eq.converged) else None
 
 
 # ------------------------------------------------------------------------------ batch

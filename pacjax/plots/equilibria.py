@@ -5,11 +5,17 @@ nothing here touches pyplot's global state or the user's backend.
 
 - :func:`draw_backbone` draws one configuration on one axes (3D, or a projection ``"xz"``,
   ``"yz"``, ``"xy"``): the body as a thick line with cross-section rings (a tube at the body's
-  radius), segment boundaries, marker sites and the scene's payloads, forces and moments.
+  radius), the joints between segments, the tendons (shaded by tension when the controls are
+  known), marker sites and the scene's payloads, forces and moments.
 - :func:`plot_equilibria` draws several configurations (cases or models) overlaid: isometric 3D,
-  front (x-z) and side (y-z) views with equal aspect, and a legend.
+  front (x-z) and side (y-z) views with equal aspect, a legend and a colour bar of tendon
+  tension.
 - :func:`plot_equilibrium_grid` draws groups of overlaid cases side by side (one column per
   group, e.g. per tendon command), with shared scales.
+
+Only the backbone takes its case's colour; markers, joints, loads and tendons look the same in
+every case, so that the legend's one glyph for each is what every case shows. The legend lists
+what the figure drew (:mod:`pacjax.plots.legend`).
 """
 
 from __future__ import annotations
@@ -21,35 +27,40 @@ import jax.numpy as jnp
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
-from matplotlib.lines import Line2D
+from matplotlib.patches import FancyArrowPatch
 
 from .._model.loads import PointForce, PointMass, PointMoment
-from .._model.query import site_frames
+from .._model.query import site_frames, tendon_tensions
 from .._model.scene import Scene
+from .legend import HANDLER_MAP, legend_entries
+from .tendons import draw_tendons, tendon_sites, tension_colorbar
 
 __all__ = ["draw_backbone", "plot_equilibria", "plot_equilibrium_grid", "CASE_COLORS"]
 
 #: Colours of successive cases (models, commands) in a figure.
 CASE_COLORS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#17becf", "#8c564b")
-_VIEWS = {"xz": (0, 2), "yz": (1, 2), "xy": (0, 1)}
-_VIEW_TITLES = {"3d": "3D view", "xz": "front (x-z)", "yz": "side (y-z)", "xy": "top (x-y)"}
+#: Projections: the world axes (x, y, z = 0, 1, 2) each 2D view shows, and every view's title.
+VIEWS = {"xz": (0, 2), "yz": (1, 2), "xy": (0, 1)}
+VIEW_TITLES = {"3d": "3D view", "xz": "front (x-z)", "yz": "side (y-z)", "xy": "top (x-y)"}
 _AXIS = "xyz"
 _POINTS_PER_SEGMENT = 24  # backbone samples per segment; rings on every other one
 _PAYLOAD_MIN_MASS = 0.05  # kg: point masses at least this heavy get a labelled weight arrow
+_NEUTRAL = "0.2"  # loads, marker edges, joints: the same in every case
+#: Legend order: the cases come first, then these, then anything else drawn.
+_LEGEND_ORDER = (
+    "base", "joint", "marker", "tendon", "slack tendon", "load", "moment", "point mass",
+)  # fmt: skip
 
 
 # ------------------------------------------------------------------------------ geometry
-def _frames(scene: Scene, q, segment, s):
-    """Rotations and positions at ``(segment[k], s[k])``, compiled once per scene structure
-    (the plots evaluate a few hundred frames per configuration; op-by-op that takes seconds)."""
-    pos, rot = site_frames(scene, q, np.asarray(segment), s)
-    return rot, pos
-
-
 class Drawn:
-    """Everything of one configuration that a figure shows, in mm (computed once)."""
+    """Everything of one configuration that a figure shows, in mm (computed once).
 
-    def __init__(self, scene: Scene, q, n_rings_per_segment: int = 8):
+    ``controls`` (one per tendon): the tendons' tensions (N) are computed and shown; None: the
+    tendons are drawn without them.
+    """
+
+    def __init__(self, scene: Scene, q, controls=None, n_rings_per_segment: int = 8):
         q = np.asarray(q, float)
         if q.shape != (scene.n_dofs,):
             raise ValueError(
@@ -58,18 +69,32 @@ class Drawn:
         self.scene = scene
         n = scene.n_segments
         n_points = n * _POINTS_PER_SEGMENT + 1
-        # Backbone samples evenly spaced in segment + s, as pacjax.backbone; then marker sites
-        # and load sites, all in one kinematics call.
+        # Backbone samples evenly spaced in segment + s, as pacjax.backbone; then marker sites,
+        # load sites and points along the tendons, all in one kinematics call (compiled once
+        # per scene structure: op by op, a few hundred frames take seconds).
         coord = np.linspace(0.0, n, n_points)
         seg = np.minimum(np.floor(coord).astype(np.int32), n - 1)
         s = coord - seg
         sites = list(scene.markers)
         loads = [x for x in scene.loads if isinstance(x, (PointMass, PointForce, PointMoment))]
-        all_seg = np.concatenate([seg, [x[0] for x in sites], [x.segment for x in loads]])
-        all_s = np.concatenate([s, [x[1] for x in sites], [float(np.asarray(x.s)) for x in loads]])
-        rot, pos = _frames(scene, jnp.asarray(q), all_seg.astype(np.int32), all_s)
+        tendons = [tendon_sites(t) for t in scene.tendons]
+        all_seg = np.concatenate(
+            [seg, [x[0] for x in sites], [x.segment for x in loads]] + [t[0] for t in tendons]
+        )
+        all_s = np.concatenate(
+            [s, [x[1] for x in sites], [float(np.asarray(x.s)) for x in loads]]
+            + [t[1] for t in tendons]
+        )
+        n_plain = n_points + len(sites) + len(loads)
+        offsets = np.concatenate([np.zeros((n_plain, 3))] + [t[2] for t in tendons])
+        pos, rot = site_frames(scene, jnp.asarray(q), all_seg.astype(np.int32), all_s, offsets)
         rot, pos = np.asarray(rot), 1e3 * np.asarray(pos)
         self.points, self.rotations = pos[:n_points], rot[:n_points]
+        ends = np.cumsum([n_plain] + [len(t[0]) for t in tendons])
+        self.tendon_paths = [pos[a:b] for a, b in zip(ends[:-1], ends[1:], strict=True)]
+        self.tensions = None
+        if controls is not None and scene.tendons:
+            self.tensions = np.asarray(tendon_tensions(scene, jnp.asarray(q), controls), float)
         r0 = np.array([float(np.asarray(x.radius)) for x in scene.robot.segments])
         r1 = np.array(
             [
@@ -81,13 +106,14 @@ class Drawn:
         step = max(1, _POINTS_PER_SEGMENT // n_rings_per_segment)
         self.ring_index = np.arange(0, n_points, step)
         self.boundary_index = np.arange(0, n_points, _POINTS_PER_SEGMENT)
+        self.joint_index = self.boundary_index[1:-1]  # between segments (the tip is no joint)
         self.markers = None
         m = len(sites)
         if sites:
             offsets = 1e3 * np.asarray([x[2] for x in sites], float)
             sl = slice(n_points, n_points + m)
             self.markers = pos[sl] + np.einsum("pij,pj->pi", rot[sl], offsets)
-        self.loads = self._loads(loads, rot[n_points + m :], pos[n_points + m :])
+        self.loads = self._loads(loads, rot[n_points + m : n_plain], pos[n_points + m : n_plain])
 
     def ring(self, i: int, n: int = 32) -> np.ndarray:
         """Cross-section circle (n, 3) at backbone point ``i``."""
@@ -136,21 +162,23 @@ def _case_style(i: int):
     return "-" if i == 0 else (0, (3.5, 1.8))
 
 
-def _as_cases(scene: Scene, equilibria) -> dict[str, tuple[Scene, np.ndarray]]:
-    """Normalise ``{label: q | Equilibrium | (scene, q)}`` or a list of them."""
+def _as_cases(scene: Scene, equilibria, controls=None) -> dict[str, tuple]:
+    """Normalise ``{label: q | Equilibrium | (scene, q) | (scene, q, controls)}`` or a list of
+    them into ``{label: (scene, q, controls)}`` (``controls`` the default)."""
     if not isinstance(equilibria, Mapping):
         if not isinstance(equilibria, Sequence) or isinstance(equilibria, (str, bytes)):
             equilibria = [equilibria]
         equilibria = {f"case {i}": e for i, e in enumerate(equilibria)}
     cases = {}
     for label, value in equilibria.items():
-        case_scene = scene
-        if isinstance(value, tuple) and len(value) == 2 and isinstance(value[0], Scene):
-            case_scene, value = value
+        case_scene, case_controls = scene, controls
+        if isinstance(value, tuple) and len(value) in (2, 3) and isinstance(value[0], Scene):
+            case_scene, value, *rest = value
+            case_controls = rest[0] if rest else controls
         q = getattr(value, "q", value)
         if case_scene is None:
             raise ValueError(f"case {label!r}: no scene given for it")
-        cases[str(label)] = (case_scene, np.asarray(q, float))
+        cases[str(label)] = (case_scene, np.asarray(q, float), case_controls)
     if not cases:
         raise ValueError("nothing to plot: no equilibria given")
     return cases
@@ -161,56 +189,77 @@ def arrow_length(drawn: Sequence[Drawn]) -> float:
     return 0.2 * max(float(np.ptp(d.points, axis=0).max() or 1.0) for d in drawn) or 50.0
 
 
+def largest_tension(drawn: Sequence[Drawn]) -> float:
+    """The largest tendon tension (N) among ``drawn`` (0 when none is known): the top of the
+    shared shade scale."""
+    known = [d.tensions for d in drawn if d.tensions is not None and d.tensions.size]
+    return float(max(np.max(t) for t in known)) if known else 0.0
+
+
 # ------------------------------------------------------------------------------ drawing
 def draw_backbone(
     ax,
     scene: Scene | Drawn,
     q=None,
     *,
+    controls=None,
     view: str = "3d",
     color: str = CASE_COLORS[0],
     label: str | None = None,
     linestyle="-",
     markers: bool = True,
     rings: bool = True,
+    tendons: bool = True,
     loads: bool = True,
     load_labels: bool = True,
     arrow_mm: float | None = None,
+    tension_scale: float | None = None,
 ):
-    """Draw one configuration on ``ax`` (positions in mm).
+    """Draw one configuration on ``ax`` (positions in mm). Every artist worth a legend entry
+    carries a label (``label`` on the backbone), so ``ax.legend()`` lists what was drawn.
 
     Args:
         ax: a 3D axes (``view="3d"``) or a 2D axes for the projection ``view`` (``"xz"``,
             ``"yz"`` or ``"xy"``).
         scene: the :class:`Scene` (or an already evaluated drawing, internal).
         q: configuration of ``scene``.
+        controls: the scene's controls (one per tendon): tendons shaded by their tension.
         color, label, linestyle: the case's colour, legend label and backbone line style.
         markers: draw the scene's marker sites; ``rings``: draw cross-section rings at the
-            body's radius (tube look); ``loads``: draw payload, force and moment arrows;
-            ``load_labels``: write their magnitudes (once per panel is enough).
+            body's radius (tube look); ``tendons``: draw the tendons along the body;
+            ``loads``: draw payload, force and moment arrows; ``load_labels``: write their
+            magnitudes (once per panel is enough).
         arrow_mm: arrow length (mm) for loads (default: a fifth of the robot).
+        tension_scale: tension (N) drawn darkest (default: this configuration's largest).
     """
-    d = scene if isinstance(scene, Drawn) else Drawn(scene, q)
-    if view != "3d" and view not in _VIEWS:
-        raise ValueError(f"view must be '3d' or one of {tuple(_VIEWS)}, got {view!r}")
-    idx = (0, 1, 2) if view == "3d" else _VIEWS[view]
+    d = scene if isinstance(scene, Drawn) else Drawn(scene, q, controls)
+    if view != "3d" and view not in VIEWS:
+        raise ValueError(f"view must be '3d' or one of {tuple(VIEWS)}, got {view!r}")
+    idx = (0, 1, 2) if view == "3d" else VIEWS[view]
     arrow_mm = arrow_length([d]) if arrow_mm is None else arrow_mm
     if rings and np.any(d.radius > 0):
         _draw_rings(ax, d, idx, color)
-    _draw_body(ax, d, idx, color, label, linestyle)
+    # A joint under a marker site, or a light mass under either or the base, would be listed
+    # but not seen: it is left out.
+    hidden = d.markers if markers and d.markers is not None else np.zeros((0, 3))
+    hidden = np.concatenate([hidden, _draw_body(ax, d, idx, color, label, linestyle, hidden)])
+    if tendons and d.tendon_paths:
+        scale = largest_tension([d]) if tension_scale is None else tension_scale
+        draw_tendons(ax, d.tendon_paths, d.tensions, idx, scale)
     if markers and d.markers is not None:
         ax.plot(
             *_project(d.markers, idx),
             ls="none",
             marker="o",
-            ms=5,
-            mfc=color,
-            mec="black",
-            mew=0.8,
+            ms=5.5,
+            mfc="white",
+            mec=_NEUTRAL,
+            mew=1.2,
+            label="marker",
             zorder=5,
         )
     if loads:
-        _draw_loads(ax, d, idx, color, arrow_mm, load_labels)
+        _draw_loads(ax, d, idx, arrow_mm, load_labels, hidden)
     return d
 
 
@@ -234,8 +283,17 @@ def _draw_rings(ax, d: Drawn, idx, color) -> None:
         )
 
 
-def _draw_body(ax, d: Drawn, idx, color, label, linestyle) -> None:
-    """The backbone (a faint wide halo under the line), the segment ends and the base."""
+def _visible(points: np.ndarray, hidden: np.ndarray) -> np.ndarray:
+    """Which of ``points`` (k, 3) lie off every point of ``hidden`` (mm)."""
+    if not len(hidden) or not len(points):
+        return np.ones(len(points), bool)
+    gap = np.linalg.norm(points[:, None] - hidden[None], axis=-1).min(axis=1)
+    return gap > 1e-6
+
+
+def _draw_body(ax, d: Drawn, idx, color, label, linestyle, hidden) -> np.ndarray:
+    """The backbone (a faint wide halo under the line), the joints (those not under a point of
+    ``hidden``) and the base; returns the points (mm) of the joints and base drawn."""
     solid = linestyle in ("-", "solid")
     points = _project(d.points, idx)
     ax.plot(*points, color=color, lw=8, alpha=0.15, solid_capstyle="round", zorder=2)
@@ -248,31 +306,62 @@ def _draw_body(ax, d: Drawn, idx, color, label, linestyle) -> None:
         solid_capstyle="round",
         zorder=3,
     )
+    joints = d.points[d.joint_index]
+    joints = joints[_visible(joints, hidden)]
+    if len(joints):
+        ax.plot(
+            *_project(joints, idx),
+            ls="none",
+            marker="D",
+            ms=5,
+            mfc="white",
+            mec=_NEUTRAL,
+            mew=1.2,
+            label="joint",
+            zorder=4,
+        )
     ax.plot(
-        *_project(d.points[d.boundary_index[1:]], idx),
+        *_project(d.points[0], idx),
         ls="none",
-        marker="D",
-        ms=5,
-        mfc="white",
-        mec=color,
-        mew=1.5,
+        marker="s",
+        ms=8,
+        color="0.3",
+        label="base",
         zorder=4,
     )
-    ax.plot(*_project(d.points[0], idx), ls="none", marker="s", ms=8, color="0.3", zorder=4)
+    return np.concatenate([joints, d.points[:1]])
 
 
-def _draw_loads(ax, d: Drawn, idx, color, arrow_mm: float, load_labels: bool) -> None:
-    """Light point masses as small squares, moments as a circular arrow, weights and forces as
-    arrows of length ``arrow_mm`` (a weight in grey, a force in the case's colour)."""
+def _draw_loads(ax, d: Drawn, idx, arrow_mm: float, load_labels: bool, hidden) -> None:
+    """Light point masses as small squares (those not under a point of ``hidden``), moments as
+    a circular arrow, weights and forces as arrows of length ``arrow_mm``, all in one dark grey
+    (their labels tell them apart)."""
     for kind, p, direction, text in d.loads:
         if kind == "mass":
-            ax.plot(*_project(p, idx), ls="none", marker="s", ms=4, color="0.35", zorder=5)
+            if not _visible(p[None], hidden)[0]:
+                continue
+            ax.plot(
+                *_project(p, idx),
+                ls="none",
+                marker="s",
+                ms=3.5,
+                color="0.35",
+                label="point mass",
+                zorder=5,
+            )
         elif kind == "moment":
-            ax.plot(*_project(p, idx), ls="none", marker="$\\circlearrowleft$", ms=14, color=color)
+            ax.plot(
+                *_project(p, idx),
+                ls="none",
+                marker="$\\circlearrowleft$",
+                ms=14,
+                color=_NEUTRAL,
+                label="moment",
+            )
             if load_labels:
                 _label(ax, _project(p, idx), text)
         else:
-            _arrow(ax, p, p + arrow_mm * direction, idx, color if kind == "force" else "0.2")
+            _arrow(ax, p, p + arrow_mm * direction, idx, _NEUTRAL)
             if load_labels:
                 _label(ax, _project(p + arrow_mm * direction, idx), text)
 
@@ -280,15 +369,15 @@ def _draw_loads(ax, d: Drawn, idx, color, arrow_mm: float, load_labels: bool) ->
 def _arrow(ax, start, end, idx, color):
     if len(idx) == 3:
         delta = end - start
-        ax.quiver(*start, *delta, color=color, lw=2, arrow_length_ratio=0.25, zorder=6)
-    else:
-        ax.annotate(
-            "",
-            xy=(end[idx[0]], end[idx[1]]),
-            xytext=(start[idx[0]], start[idx[1]]),
-            arrowprops=dict(arrowstyle="-|>", color=color, lw=2, mutation_scale=14),
-            zorder=6,
+        ax.quiver(
+            *start, *delta, color=color, lw=2, arrow_length_ratio=0.25, label="load", zorder=6
         )
+    else:
+        start, end = (start[idx[0]], start[idx[1]]), (end[idx[0]], end[idx[1]])
+        arrow = FancyArrowPatch(
+            start, end, arrowstyle="-|>", color=color, lw=2, mutation_scale=14, zorder=6
+        )
+        ax.add_patch(arrow).set_label("load")
 
 
 def _label(ax, coords, text):
@@ -299,7 +388,7 @@ def _label(ax, coords, text):
 
 
 def _draw_targets(ax, targets, view):
-    idx = (0, 1, 2) if view == "3d" else _VIEWS[view]
+    idx = (0, 1, 2) if view == "3d" else VIEWS[view]
     for i, (label, pts) in enumerate(targets.items()):
         pts = 1e3 * np.atleast_2d(np.asarray(pts, float))
         ax.plot(
@@ -329,7 +418,7 @@ def set_limits(ax, view: str, lo: np.ndarray, hi: np.ndarray):
         ax.tick_params(labelsize=7, pad=0)
         ax.view_init(elev=22, azim=-55)
     else:
-        i, j = _VIEWS[view]
+        i, j = VIEWS[view]
         ax.set_xlim(center[i] - half, center[i] + half)
         ax.set_ylim(center[j] - half, center[j] + half)
         ax.set_aspect("equal")
@@ -348,27 +437,14 @@ def _normalise_targets(targets):
     return {"target": targets}
 
 
-def _legend(fig, cases: Sequence[str], show_markers: bool, targets: Mapping, has_loads: bool):
-    handles = [
-        Line2D([], [], color=_case_color(i), ls=_case_style(i), lw=3, label=label)
-        for i, label in enumerate(cases)
-    ]
-    handles.append(
-        Line2D([], [], ls="none", marker="D", mfc="white", mec="0.3", label="segment end")
-    )
-    if show_markers:
-        handles.append(
-            Line2D([], [], ls="none", marker="o", mfc="0.7", mec="black", label="marker")
-        )
-    handles.append(Line2D([], [], ls="none", marker="s", color="0.3", label="base"))
-    for i, label in enumerate(targets):
-        handles.append(
-            Line2D([], [], ls="none", marker="x" if i == 0 else "+", mew=2, color="k", label=label)
-        )
-    if has_loads:
-        handles.append(Line2D([], [], color="0.2", lw=2, marker=">", ms=5, label="load"))
+def _legend(fig, axes, cases: Sequence[str]):
+    """One legend under the panels: the cases, then every kind of thing drawn, each glyph
+    copied from an artist in the figure."""
+    handles, labels = legend_entries(axes, first=[*cases, *_LEGEND_ORDER])
     fig.legend(
-        handles=handles,
+        handles,
+        labels,
+        handler_map=HANDLER_MAP,
         loc="lower center",
         ncol=min(len(handles), 8),
         frameon=False,
@@ -383,6 +459,7 @@ def plot_equilibrium_grid(
     *,
     title: str | None = None,
     scene: Scene | None = None,
+    controls=None,
     markers: bool = True,
     targets=None,
     views: Sequence[str] = ("3d", "xz", "yz"),
@@ -391,11 +468,14 @@ def plot_equilibrium_grid(
     all panels at the same scale.
 
     Args:
-        groups: ``{group title: {case label: q | Equilibrium | (scene, q)}}``; the same case
-            label in every group gets the same colour (e.g. one colour per model).
+        groups: ``{group title: {case label: q | Equilibrium | (scene, q) | (scene, q,
+            controls)}}``; the same case label in every group gets the same colour (e.g. one
+            colour per model).
         path: where to save the figure (PNG, PDF, ... by extension); None: only return it.
         title: figure title.
         scene: the scene of cases given as a bare ``q`` or Equilibrium.
+        controls: the controls of cases given without their own: with them, the tendons are
+            shaded by tension, with a colour bar in N.
         markers: draw marker sites.
         targets: points (m, 3) in metres, or ``{label: points}``, drawn in every panel.
         views: rows, among ``"3d"``, ``"xz"``, ``"yz"``, ``"xy"``.
@@ -404,9 +484,12 @@ def plot_equilibrium_grid(
         The :class:`matplotlib.figure.Figure`.
     """
     for view in views:
-        if view != "3d" and view not in _VIEWS:
-            raise ValueError(f"views must be '3d' or among {tuple(_VIEWS)}, got {view!r}")
-    drawn = {g: {k: Drawn(*v) for k, v in _as_cases(scene, c).items()} for g, c in groups.items()}
+        if view != "3d" and view not in VIEWS:
+            raise ValueError(f"views must be '3d' or among {tuple(VIEWS)}, got {view!r}")
+    drawn = {
+        g: {k: Drawn(*v) for k, v in _as_cases(scene, c, controls).items()}
+        for g, c in groups.items()
+    }
     if not drawn:
         raise ValueError("nothing to plot: no groups given")
     labels: list[str] = []
@@ -417,6 +500,7 @@ def plot_equilibrium_grid(
     arrow_mm = arrow_length(everything)
 
     single = len(drawn) == 1  # one group: the views side by side
+    tension_scale = largest_tension(everything)
     fig = _panel_figure(
         drawn,
         views,
@@ -425,12 +509,14 @@ def plot_equilibrium_grid(
         targets=targets,
         arrow_mm=arrow_mm,
         box=_bounding_box(everything, targets, arrow_mm),
+        tension_scale=tension_scale,
     )
     if title:
         fig.suptitle(title, fontsize=14)
-    show_markers = markers and any(d.markers is not None for d in everything)
-    has_loads = any(kind in ("weight", "force") for d in everything for kind, *_ in d.loads)
-    _legend(fig, labels, show_markers, targets, has_loads)
+    panels = list(fig.axes)
+    if tension_scale > 0:
+        tension_colorbar(fig, panels, tension_scale)
+    _legend(fig, panels, [*labels, *targets])
     # Constrained layout does not see a 3D axes' z label: leave room for it explicitly.
     fig.get_layout_engine().set(
         rect=(0, 0.06 if single else 0.035, 1, 0.96), wspace=0.08 if "3d" in views else 0.02
@@ -449,7 +535,7 @@ def _bounding_box(everything: Sequence[Drawn], targets: Mapping, arrow_mm: float
     return pts.min(axis=0), pts.max(axis=0)
 
 
-def _panel_figure(drawn, views, order, *, markers, targets, arrow_mm, box) -> Figure:
+def _panel_figure(drawn, views, order, *, markers, targets, arrow_mm, box, tension_scale):
     """A figure of one panel per group x view, each case coloured by its place in ``order``;
     titles: the groups over the columns and the views down the first, or, for one group, its
     views side by side under their names."""
@@ -468,19 +554,21 @@ def _panel_figure(drawn, views, order, *, markers, targets, arrow_mm, box) -> Fi
                     d,
                     view=view,
                     color=_case_color(order[label]),
+                    label=label,
                     linestyle=_case_style(order[label]),
                     markers=markers,
                     load_labels=j == 0,
                     arrow_mm=arrow_mm,
+                    tension_scale=tension_scale,
                 )
             _draw_targets(ax, targets, view)
             set_limits(ax, view, *box)
             if single:
-                ax.set_title(_VIEW_TITLES[view], fontsize=11)
+                ax.set_title(VIEW_TITLES[view], fontsize=11)
             elif row == 0:
                 ax.set_title(group, fontsize=12, fontweight="bold")
             elif col == 0:
-                ax.set_title(_VIEW_TITLES[view], fontsize=10, loc="left", color="0.3")
+                ax.set_title(VIEW_TITLES[view], fontsize=10, loc="left", color="0.3")
     return fig
 
 
@@ -490,6 +578,7 @@ def plot_equilibria(
     path=None,
     *,
     title: str | None = None,
+    controls=None,
     markers: bool = True,
     targets=None,
     views: Sequence[str] = ("3d", "xz", "yz"),
@@ -499,9 +588,12 @@ def plot_equilibria(
     Args:
         scene: the :class:`Scene` the configurations belong to (None when every case carries
             its own scene, e.g. comparing models).
-        equilibria: ``{label: q | Equilibrium | (scene, q)}``, a list of them, or one.
+        equilibria: ``{label: q | Equilibrium | (scene, q) | (scene, q, controls)}``, a list of
+            them, or one.
         path: where to save the figure; None: only return it.
         title: figure title.
+        controls: the controls of cases given without their own: with them, the tendons are
+            shaded by tension, with a colour bar in N.
         markers: draw the scene's marker sites.
         targets: points (m, 3) in metres, or ``{label: points}`` (e.g. measured markers).
         views: panels, among ``"3d"``, ``"xz"``, ``"yz"``, ``"xy"``.
@@ -510,7 +602,7 @@ def plot_equilibria(
         The :class:`matplotlib.figure.Figure`.
     """
     return plot_equilibrium_grid(
-        {"": _as_cases(scene, equilibria)},
+        {"": _as_cases(scene, equilibria, controls)},
         path,
         title=title,
         markers=markers,
