@@ -82,7 +82,7 @@ class Progress:
             self.bar.set_postfix_str(note, refresh=refresh)
 
     def log(self) -> None:
-        """One line: ``batch: 1200/5000 eq (24 %), 310.2 eq/s, 12 s left``."""
+        """One line: ``DESC: DONE/TOTAL UNIT (PERCENT %), RATE UNIT/s, TIME left``."""
         now = time.monotonic()
         self.last = now
         elapsed = now - self.start
