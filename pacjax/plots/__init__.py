@@ -1,6 +1,6 @@
 """Figures: equilibria (:mod:`pacjax.plots.equilibria`), identifications
-(:mod:`pacjax.plots.fit`) and simulated motions (:mod:`pacjax.plots.animation`). Imports
-matplotlib."""
+(:mod:`pacjax.plots.fit`), simulated motions (:mod:`pacjax.plots.animation`) and batch
+workspaces (:mod:`pacjax.plots.batch`). Imports matplotlib."""
 
 from .equilibria import CASE_COLORS as CASE_COLORS
 from .equilibria import draw_backbone as draw_backbone

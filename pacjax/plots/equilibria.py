@@ -239,10 +239,13 @@ def draw_backbone(
     arrow_mm = arrow_length([d]) if arrow_mm is None else arrow_mm
     if rings and np.any(d.radius > 0):
         _draw_rings(ax, d, idx, color)
-    # A joint under a marker site, or a light mass under either or the base, would be listed
-    # but not seen: it is left out.
+    # A joint under a marker site, or a light mass under either, the base or another load,
+    # would be listed but not seen: it is left out.
     hidden = d.markers if markers and d.markers is not None else np.zeros((0, 3))
-    hidden = np.concatenate([hidden, _draw_body(ax, d, idx, color, label, linestyle, hidden)])
+    others = [p[None] for kind, p, *_ in d.loads if kind != "mass"]
+    hidden = np.concatenate(
+        [hidden, _draw_body(ax, d, idx, color, label, linestyle, hidden), *others]
+    )
     if tendons and d.tendon_paths:
         scale = largest_tension([d]) if tension_scale is None else tension_scale
         draw_tendons(ax, d.tendon_paths, d.tensions, idx, scale)
