@@ -245,13 +245,19 @@ def _read_targets(path: str, units: str = "m") -> np.ndarray:
     return targets
 
 
+#: A target this many robot lengths from the base is a units mistake (millimetres read as
+#: metres are 1,000 times too far), not merely out of reach.
+UNITS_SUSPECT_REACH = 10.0
+
+
 def _check_reach(path: str, scene, targets: np.ndarray, units: str) -> None:
-    """A target further from the base than the robot is long is a units mistake more often
-    than a wish: say so before anything is compiled."""
+    """A target many times further from the base than the robot is long was written in other
+    units: say so before anything is compiled (one just out of reach is solved, and reported
+    as not reached)."""
     length = float(scene.robot.total_length)
     distance = np.linalg.norm(targets - np.asarray(scene.robot.base_position), axis=1)
     far = int(np.argmax(distance))
-    if distance[far] > 1.5 * length:
+    if distance[far] > UNITS_SUSPECT_REACH * length:
         raise click.ClickException(
             f"{path}: row {far + 1}: the target is {distance[far]:.4g} m from the base; the robot "
             f"is {length:.4g} m long. Units? (read as {units}; --units mm|cm|m)"
