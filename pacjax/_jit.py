@@ -7,6 +7,11 @@ with the same run time for the statics programs (``benchmarks/RESULTS.md``, "Ben
 steps, 100x dt growth, classic XLA:CPU emitters"). The dynamics keep the default emitters: its
 long integrations ran slower with the classic ones.
 
+``PACJAX_FAST_COMPILE=1`` adds LLVM's optimisation level 0 (``xla_backend_optimization_level``)
+to them: the statics programs then compile in roughly two thirds of the time and run slower
+(``benchmarks/RESULTS.md``, "CI time"), which pays where each program runs a few times (the
+test suite, one-off solves); the dynamics' long integrations keep the default level.
+
 The options go to CPU compilations only, are left out where ``XLA_FLAGS`` sets them (the
 user's choice stands), and are dropped when this jaxlib does not know them (checked once, on a
 trivial program, at the first compilation). JAX takes compile options on a top-level ``jit``
@@ -45,6 +50,8 @@ _TOP_LEVEL = _state_outside_any_trace()
 
 #: XLA debug options of CPU compilations (see the module docstring).
 CPU_COMPILE_OPTIONS = {"xla_cpu_use_fusion_emitters": False}
+#: Added with ``PACJAX_FAST_COMPILE=1``: compile time before run time.
+FAST_COMPILE_OPTIONS = {"xla_backend_optimization_level": 0}
 
 
 @functools.cache
@@ -54,7 +61,10 @@ def compile_options(backend: str) -> tuple[tuple[str, object], ...]:
     if backend != "cpu":
         return ()
     flags = os.environ.get("XLA_FLAGS", "")
-    options = {k: v for k, v in CPU_COMPILE_OPTIONS.items() if f"--{k}=" not in flags}
+    wanted = dict(CPU_COMPILE_OPTIONS)
+    if os.environ.get("PACJAX_FAST_COMPILE", "") not in ("", "0"):
+        wanted.update(FAST_COMPILE_OPTIONS)
+    options = {k: v for k, v in wanted.items() if f"--{k}=" not in flags}
     if not options:
         return ()
     try:

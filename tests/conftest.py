@@ -11,14 +11,10 @@ import pathlib
 if "PYTEST_XDIST_WORKER" in os.environ:
     os.environ.setdefault("XLA_PYTHON_CLIENT_PREALLOCATE", "false")
 
-# LLVM's lowest optimisation level for XLA:CPU programs: the suite compiles hundreds of
-# programs and runs most of them a few times, so compilation is most of its time, and level 0
-# compiles in roughly half of it at the price of slower kernels (``benchmarks/RESULTS.md``,
-# "CI time"). The numerics are IEEE either way. A level already set in XLA_FLAGS stands.
-if "--xla_backend_optimization_level" not in os.environ.get("XLA_FLAGS", ""):
-    os.environ["XLA_FLAGS"] = " ".join(
-        filter(None, [os.environ.get("XLA_FLAGS"), "--xla_backend_optimization_level=0"])
-    )
+# The statics programs compiled for compile time (pacjax._jit: LLVM's optimisation level 0): the
+# suite compiles hundreds of them and runs most a few times, so compiling is most of its time.
+# The dynamics' long integrations keep the default level. PACJAX_FAST_COMPILE=0 turns it off.
+os.environ.setdefault("PACJAX_FAST_COMPILE", "1")
 
 import jax  # noqa: E402
 import pytest  # noqa: E402

@@ -21,8 +21,17 @@ def test_options_apply_on_cpu_unless_xla_flags_sets_them_or_xla_lacks_them(
     fresh_options, monkeypatch
 ):
     monkeypatch.delenv("XLA_FLAGS", raising=False)
+    monkeypatch.delenv("PACJAX_FAST_COMPILE", raising=False)
     # This jaxlib knows them (jax 0.10; an older one may not, and then they are dropped).
     assert dict(_jit.compile_options("cpu")) == _jit.CPU_COMPILE_OPTIONS
+    _jit.compile_options.cache_clear()
+    monkeypatch.setenv("PACJAX_FAST_COMPILE", "1")
+    fast = _jit.CPU_COMPILE_OPTIONS | _jit.FAST_COMPILE_OPTIONS
+    assert dict(_jit.compile_options("cpu")) == fast
+    _jit.compile_options.cache_clear()
+    monkeypatch.setenv("XLA_FLAGS", "--xla_backend_optimization_level=2")
+    assert dict(_jit.compile_options("cpu")) == _jit.CPU_COMPILE_OPTIONS  # the user's level
+    monkeypatch.delenv("PACJAX_FAST_COMPILE")
     assert _jit.compile_options("gpu") == ()
     _jit.compile_options.cache_clear()
     monkeypatch.setenv("XLA_FLAGS", "--xla_cpu_use_fusion_emitters=true")
@@ -37,6 +46,7 @@ def test_options_only_on_top_level_calls_and_the_same_result(fresh_options, monk
     # JAX rejects compile options on a jit nested in another trace: such calls compile
     # without them, as part of the caller's program.
     monkeypatch.delenv("XLA_FLAGS", raising=False)
+    monkeypatch.delenv("PACJAX_FAST_COMPILE", raising=False)
     seen = []
     filter_jit = eqx.filter_jit
 
