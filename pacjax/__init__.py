@@ -7,10 +7,14 @@ see :mod:`pacjax._x64`.
 """
 
 import importlib
+from importlib import metadata
 
 from . import _deprecated, _x64  # standard library only
 
-__version__ = "0.1.0"
+try:
+    __version__ = metadata.version("pacjax")  # pyproject.toml's, as installed
+except metadata.PackageNotFoundError:  # a source tree on sys.path, not installed
+    __version__ = "0+unknown"
 
 _x64.request()
 _deprecated.install()

@@ -203,3 +203,16 @@ def test_the_batch_reports_rows_as_they_leave_the_pool():
     chunks = list(pj.iter_batch(scene, commands, chunk_size=300, on_rows=counts.append))
     assert len(chunks) == 1 and sum(counts) == 300
     assert len(counts) > 2  # several times within the one chunk
+
+
+def test_a_batch_without_a_terminal_logs_its_progress(tmp_path, monkeypatch):
+    from pacjax.cli import common
+
+    monkeypatch.setattr(common, "LOG_INTERVAL", 0.0)  # a line at every update
+    result = CliRunner().invoke(
+        cli, ["batch", TENDON_SINGLE, "--n", "16", "--chunk-size", "8", "--out", str(tmp_path)]
+    )
+    assert result.exit_code == 0, result.output
+    lines = [line for line in result.output.splitlines() if line.startswith("batch: ")]
+    assert lines and lines[-1].startswith("batch: 16/16 eq (100 %), ")
+    assert all(" eq" in line for line in lines)

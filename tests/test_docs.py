@@ -104,3 +104,12 @@ def test_the_examples_run(example, tmp_path, monkeypatch):
     monkeypatch.setattr(sys, "argv", [example, "--quick"])
     runpy.run_path(str(ROOT / "examples" / example), run_name="__main__")
     assert list(tmp_path.iterdir()), "the example wrote nothing"
+
+
+def test_the_version_is_the_installed_packages():
+    from importlib import metadata
+
+    assert pj.__version__ == metadata.version("pacjax")
+    assert "Programming Language :: Python :: 3.13" in metadata.metadata("pacjax").get_all(
+        "Classifier"
+    )

@@ -51,13 +51,18 @@ def summary(scene, q, controls):
     return tip, marker_positions, tensions
 
 
+#: Seconds between two progress lines where there is no terminal to draw a bar on.
+LOG_INTERVAL = 10.0
+
+
 class Progress:
     """Progress of a long command: a tqdm bar on a terminal; elsewhere (a log file, a pipe, a
     batch job) a line every ``interval`` seconds with the count, the rate and the time left, so
     that a log shows a run is alive. Counts in one ``unit`` throughout."""
 
-    def __init__(self, total: int, desc: str, unit: str = "eq", interval: float = 10.0, file=None):
-        self.total, self.desc, self.unit, self.interval = total, desc, unit, interval
+    def __init__(self, total: int, desc: str, unit: str = "eq", interval=None, file=None):
+        self.total, self.desc, self.unit = total, desc, unit
+        self.interval = LOG_INTERVAL if interval is None else interval
         self.file = sys.stderr if file is None else file
         self.done = 0
         self.note = ""
