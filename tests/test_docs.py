@@ -113,3 +113,13 @@ def test_the_version_is_the_installed_packages():
     assert "Programming Language :: Python :: 3.13" in metadata.metadata("pacjax").get_all(
         "Classifier"
     )
+
+
+def test_every_public_name_has_an_api_entry():
+    listed = set(re.findall(r"^::: (\S+)$", (ROOT / "docs" / "api.md").read_text(), re.M))
+    missing = [
+        name
+        for name, module in pj._PUBLIC.items()
+        if f"pacjax{module}.{name}" not in listed and f"{module}.{name}" not in listed
+    ]
+    assert not missing, missing
