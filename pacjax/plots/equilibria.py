@@ -250,17 +250,7 @@ def draw_backbone(
         scale = largest_tension([d]) if tension_scale is None else tension_scale
         draw_tendons(ax, d.tendon_paths, d.tensions, idx, scale)
     if markers and d.markers is not None:
-        ax.plot(
-            *_project(d.markers, idx),
-            ls="none",
-            marker="o",
-            ms=5.5,
-            mfc="white",
-            mec=_NEUTRAL,
-            mew=1.2,
-            label="marker",
-            zorder=5,
-        )
+        _hollow_points(ax, _project(d.markers, idx), "o", 5.5, "marker", zorder=5)
     if loads:
         _draw_loads(ax, d, idx, arrow_mm, load_labels, hidden)
     return d
@@ -284,6 +274,22 @@ def _draw_rings(ax, d: Drawn, idx, color) -> None:
             alpha=0.9 if i == 0 else (0.7 if boundary else 0.3),
             zorder=1,
         )
+
+
+def _hollow_points(ax, coordinates, marker: str, size: float, label: str, zorder: int) -> None:
+    """Points drawn as white glyphs with a dark edge (markers, joints): the same in every case,
+    so that one legend entry stands for all of them."""
+    ax.plot(
+        *coordinates,
+        ls="none",
+        marker=marker,
+        ms=size,
+        mfc="white",
+        mec=_NEUTRAL,
+        mew=1.2,
+        label=label,
+        zorder=zorder,
+    )
 
 
 def _visible(points: np.ndarray, hidden: np.ndarray) -> np.ndarray:
@@ -312,17 +318,7 @@ def _draw_body(ax, d: Drawn, idx, color, label, linestyle, hidden) -> np.ndarray
     joints = d.points[d.joint_index]
     joints = joints[_visible(joints, hidden)]
     if len(joints):
-        ax.plot(
-            *_project(joints, idx),
-            ls="none",
-            marker="D",
-            ms=5,
-            mfc="white",
-            mec=_NEUTRAL,
-            mew=1.2,
-            label="joint",
-            zorder=4,
-        )
+        _hollow_points(ax, _project(joints, idx), "D", 5, "joint", zorder=4)
     ax.plot(
         *_project(d.points[0], idx),
         ls="none",
