@@ -16,11 +16,11 @@ from matplotlib.figure import Figure
 from .._dynamics.simulate import Trajectory
 from .._model.query import tip_pose
 from .._model.scene import Scene
+from .drawn import Drawn
 from .equilibria import (
     CASE_COLORS,
     VIEW_TITLES,
     VIEWS,
-    Drawn,
     arrow_length,
     draw_backbone,
     set_limits,
