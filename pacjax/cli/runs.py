@@ -309,8 +309,9 @@ def _plain(value):
     return value.tolist() if isinstance(value, np.ndarray | np.generic) else value
 
 
-#: The options that choose a batch's commands and solver: a resumed run takes them from its file.
-_RUN_SETTINGS = ("n", "sampler", "seed", "low", "high", "chunk_size", "tol", "use_float32")
+#: The options that choose a batch's commands, solver and files: a resumed run takes them from
+#: its file (its outputs go beside it).
+_RUN_SETTINGS = ("n", "sampler", "seed", "low", "high", "chunk_size", "tol", "use_float32", "out")
 
 
 def _resumed_inputs(path: str, scene_file: str | None):
