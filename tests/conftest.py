@@ -11,11 +11,6 @@ import pathlib
 if "PYTEST_XDIST_WORKER" in os.environ:
     os.environ.setdefault("XLA_PYTHON_CLIENT_PREALLOCATE", "false")
 
-# The statics programs compiled for compile time (pacjax._jit: LLVM's optimisation level 0): the
-# suite compiles hundreds of them and runs most a few times, so compiling is most of its time.
-# PACJAX_FAST_COMPILE=0 turns it off; see also pytest_configure.
-os.environ.setdefault("PACJAX_FAST_COMPILE", "1")
-
 import jax  # noqa: E402
 import pytest  # noqa: E402
 
@@ -31,20 +26,6 @@ os.environ.setdefault(
     "PACJAX_CACHE_DIR", str(pathlib.Path(__file__).resolve().parent.parent / ".pytest-jax-cache")
 )
 _cache.enable_from_environment()
-
-
-def pytest_configure(config):
-    """A run without the slow tests (the default step) compiles every program at LLVM's level 0,
-    the tests' own ``jit``s included: nothing in it runs long. The slow tests' integrations over
-    thousands of steps ran 1.5-3.5x longer so (``benchmarks/RESULTS.md``, "CI time"): a run
-    that includes them keeps level 0 for the statics alone. Decided before any compilation, in
-    the process that starts the parallel workers (they inherit the environment); a level that
-    ``XLA_FLAGS`` sets stands."""
-    flags = os.environ.get("XLA_FLAGS", "")
-    if "PYTEST_XDIST_WORKER" in os.environ or "--xla_backend_optimization_level" in flags:
-        return
-    if "not slow" in (config.getoption("markexpr") or ""):
-        os.environ["XLA_FLAGS"] = f"{flags} --xla_backend_optimization_level=0".strip()
 
 
 @pytest.fixture(autouse=True, scope="module")
