@@ -9,8 +9,9 @@ long integrations ran slower with the classic ones.
 
 ``PACJAX_FAST_COMPILE=1`` adds LLVM's optimisation level 0 (``xla_backend_optimization_level``)
 to them: the statics programs then compile in roughly two thirds of the time and run slower
-(``benchmarks/RESULTS.md``, "CI time"), which pays where each program runs a few times (the
-test suite, one-off solves); the dynamics' long integrations keep the default level.
+(``benchmarks/RESULTS.md``, "CI time"), which pays where each program runs a few times (one-off
+solves); the dynamics' long integrations keep the default level. Results differ from the
+default level's in the last bits, which can decide a float32 solve at its round-off floor.
 
 The options go to CPU compilations only, are left out where ``XLA_FLAGS`` sets them (the
 user's choice stands), and are dropped when this jaxlib does not know them (checked once, on a
