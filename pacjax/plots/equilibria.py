@@ -187,6 +187,11 @@ def _hollow_points(ax, coordinates, marker: str, size: float, label: str, zorder
     )
 
 
+def _square(ax, coordinates, size: float, color: str, label: str, zorder: int) -> None:
+    """A filled grey square (the base, a light point mass)."""
+    ax.plot(*coordinates, ls="none", marker="s", ms=size, color=color, label=label, zorder=zorder)
+
+
 def _visible(points: np.ndarray, hidden: np.ndarray) -> np.ndarray:
     """Which of ``points`` (k, 3) lie off every point of ``hidden`` (mm)."""
     if not len(hidden) or not len(points):
@@ -214,15 +219,7 @@ def _draw_body(ax, d: Drawn, idx, color, label, linestyle, hidden) -> np.ndarray
     joints = joints[_visible(joints, hidden)]
     if len(joints):
         _hollow_points(ax, _project(joints, idx), "D", 5, "joint", zorder=4)
-    ax.plot(
-        *_project(d.points[0], idx),
-        ls="none",
-        marker="s",
-        ms=8,
-        color="0.3",
-        label="base",
-        zorder=4,
-    )
+    _square(ax, _project(d.points[0], idx), 8, "0.3", "base", zorder=4)
     return np.concatenate([joints, d.points[:1]])
 
 
@@ -234,15 +231,7 @@ def _draw_loads(ax, d: Drawn, idx, arrow_mm: float, load_labels: bool, hidden) -
         if kind == "mass":
             if not _visible(p[None], hidden)[0]:
                 continue
-            ax.plot(
-                *_project(p, idx),
-                ls="none",
-                marker="s",
-                ms=3.5,
-                color="0.35",
-                label="point mass",
-                zorder=5,
-            )
+            _square(ax, _project(p, idx), 3.5, "0.35", "point mass", zorder=5)
         elif kind == "moment":
             ax.plot(
                 *_project(p, idx),
