@@ -223,3 +223,14 @@ def test_the_bending_vector_step_reaches_the_same_equilibria_in_fewer_steps(monk
         np.mean(curved.steps),
         np.mean(straight.steps),
     )
+
+
+def test_round_off_curvature_counts_as_straight():
+    """An equilibrium solved from the straight state comes back with curvatures of about 1e-18:
+    still straight, so the start (of a solve or a simulation from it) turns its planes."""
+    scene = pj.presets.stella2023(pj.PAC(), tip_mass=0.2)
+    q0 = np.zeros((3, 4))
+    q0[:, :2] = [[-1.9e-18, -8e-19], [-1.2e-18, -1.9e-18], [-2.9e-19, 2.2e-18]]
+    start = _aligned(scene, _pull(1, 0), q0.reshape(-1))
+    assert np.cos(2 * (start[1, 2] - ANGLES[0])) == pytest.approx(1.0, abs=1e-12)
+    assert start[2, 2] == start[1, 2]
