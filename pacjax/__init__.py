@@ -60,6 +60,7 @@ _PUBLIC = {
     "Damping": ".dynamics",
     "Trajectory": ".dynamics",
     "simulate": ".dynamics",
+    "simulate_batch": ".dynamics",
     "InverseResult": ".inverse",
     "Tracking": ".inverse",
     "Workspace": ".inverse",

@@ -38,6 +38,7 @@ import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import jax.tree_util as jtu
 import lineax as lx
 import numpy as np
 from jaxtyping import Array, Bool, Float, Int
@@ -62,16 +63,23 @@ from .._model.inputs import (
     solver_dtype,
     static_load_sites,
 )
+from .._model.kinematics import jacobian_and_value
 from .._model.robot import concrete
 from .._model.scene import Scene
 from .._results import RESULTS
+from .._statics.batch import check_devices, row_sharding
+from .._statics.pool import pad_rows
 from .._statics.problem import ScaledProblem
 from .damping import DEFAULT_DAMPING_RATIO, Damping, generalised_eigenvalues
+from .rosenbrock import Rosenbrock23
 
 __all__ = [
     "Damping",
     "Trajectory",
     "simulate",
+    "simulate_batch",
+    "Rosenbrock23",
+    "rosenbrock23",
     "mass_matrix",
     "kinetic_energy",
     "coriolis_forces",
@@ -119,39 +127,82 @@ class _Model(eqx.Module):
 
         return jax.grad(rate_energy)(qdot)
 
-    def tendon_forces(self, q, qdot, u, udot):
-        """``A(q) f_act``: generalised forces of the tendons under the motor PD law."""
-        scene = self.scene
-        lengths, lin = jax.linearize(scene.tendon_lengths, q)
-        rates = lin(qdot)
-        rest = scene.rest_tendon_lengths(q.dtype)
-        tension = []
-        for i, t in enumerate(scene.tendons):
+    def _motor_law(self, lengths, rates, u, udot):
+        """Tendon tensions (N) under the motor PD law, and their derivative in the tendon
+        rates (the derivative gain while the tendon is taut, zero when slack or in tension
+        mode)."""
+        rest = self.scene.rest_tendon_lengths(lengths.dtype)
+        tension, gains = [], []
+        for i, t in enumerate(self.scene.tendons):
             if t.mode == "length":
                 stretch = lengths[i] - (rest[i] - u[i])
                 stretch_rate = rates[i] + udot[i]
-                pull = t.gain.astype(q.dtype) * stretch + self.tendon_damping[i] * stretch_rate
+                pull = (
+                    t.gain.astype(lengths.dtype) * stretch + self.tendon_damping[i] * stretch_rate
+                )
                 tension.append(jnp.maximum(pull, 0.0))
+                gains.append(jnp.where(pull > 0, self.tendon_damping[i], 0.0))
             else:
                 tension.append(u[i])
-        (force,) = jax.linear_transpose(lin, q)(-jnp.stack(tension))
+                gains.append(jnp.zeros((), lengths.dtype))
+        return jnp.stack(tension), jnp.stack(gains)
+
+    def tendon_forces(self, q, qdot, u, udot):
+        """``A(q) f_act``: generalised forces of the tendons under the motor PD law."""
+        lengths, lin = jax.linearize(self.scene.tendon_lengths, q)
+        tension, _ = self._motor_law(lengths, lin(qdot), u, udot)
+        (force,) = jax.linear_transpose(lin, q)(-tension)
         return force
 
-    def accelerations(self, q, qdot, u, udot):
-        """``qddot`` from ``M qddot = -C qdot - G - K - D qdot + A f_act + Q_ext``."""
-        mass, bias = body_dynamics(self.scene, q, qdot, self.phi_inertia)
-        force = -jax.grad(self.passive.potential_energy)(q, u) - bias
+    def forces(self, q, qdot, u, udot, mass):
+        """Every generalised force but inertia's: ``-G - K - D qdot + A f_act + Q_ext``, the
+        mass-proportional damping on ``mass`` (``M(q)``, passed in to be computed once)."""
+        force = -jax.grad(self.passive.potential_energy)(q, u)
         extra = self.passive.nonconservative_forces(q)
         if extra is not None:
             force = force + extra
         if self.scene.tendons:
             force = force + self.tendon_forces(q, qdot, u, udot)
         force = force - self.damping.stiffness * self.material_damping(q, qdot)
-        force = force - self.damping.mass * (jnp.matmul(mass, qdot, precision=MATMUL_PRECISION))
+        return force - self.damping.mass * jnp.matmul(mass, qdot, precision=MATMUL_PRECISION)
+
+    def accelerations(self, q, qdot, u, udot):
+        """``qddot`` from ``M qddot = -C qdot - G - K - D qdot + A f_act + Q_ext``."""
+        mass, bias = body_dynamics(self.scene, q, qdot, self.phi_inertia)
         operator = lx.MatrixLinearOperator(mass, lx.positive_semidefinite_tag)
         # throw=False: a wild Newton iterate of the implicit solver gives NaN here, and diffrax
         # must see it to reject the step (a raise would abort the whole simulation).
+        force = self.forces(q, qdot, u, udot, mass) - bias
         return lx.linear_solve(operator, force, lx.Cholesky(), throw=False).value
+
+    def frozen_inertia_jacobian(self, q, qdot, u, udot) -> Float[Array, "2n 2n"]:
+        """``d(qdot, qddot) / d(q, qdot)`` with the inertia frozen, for a W-method
+        (:class:`pacjax._dynamics.rosenbrock.Rosenbrock23`, whose order does not depend on it).
+
+        ``qddot``'s rows are ``M(q)^-1 (dF/dq, dF/dqdot)`` with ``M`` held fixed, the Coriolis
+        forces left out, ``dF/dq`` the Hessian of the potential energy with the tendons as the
+        springs of their motors' proportional gains (the statics' energy), and ``dF/dqdot`` the
+        damping: material, mass-proportional, and the motors' derivative gains on taut tendons.
+        That is the stiff part of the dynamics; what is left out (the inertia's derivatives,
+        and the damping forces' derivatives in ``q``) is as slow as the motion, and is the
+        kinematics differentiated twice or three times.
+        """
+        n = q.shape[0]
+        scene = self.scene
+        mass = mass_matrix(scene, q, self.phi_inertia)
+        d_q = -jax.hessian(scene.potential_energy)(q, u)
+        if self.passive.nonconservative_forces(q) is not None:
+            d_q = d_q + jax.jacfwd(self.passive.nonconservative_forces)(q)
+        d_qdot = -self.damping.stiffness * jax.jacfwd(self.material_damping, argnums=1)(q, qdot)
+        d_qdot = d_qdot - self.damping.mass * mass
+        if scene.tendons:
+            jac, lengths = jacobian_and_value(scene.tendon_lengths, q)
+            _, gains = self._motor_law(lengths, jac @ qdot, u, udot)
+            d_qdot = d_qdot - jnp.matmul(jac.T * gains, jac, precision=MATMUL_PRECISION)
+        factor = jax.scipy.linalg.cho_factor(mass)
+        lower = jax.scipy.linalg.cho_solve(factor, jnp.concatenate([d_q, d_qdot], axis=1))
+        upper = jnp.concatenate([jnp.zeros((n, n), q.dtype), jnp.eye(n, dtype=q.dtype)], axis=1)
+        return jnp.concatenate([upper, lower], axis=0)
 
 
 def _control_fn(controls, n_tendons: int, dtype) -> Callable:
@@ -344,16 +395,33 @@ def simulate(
     """
     check_scene(scene)
     dtype = solver_dtype(scene)
-    _check_body(scene)
     t0, t1 = _check_span(t_span)
-    ts = _check_saveat(saveat, t0, t1)
     controls = _check_controls(scene, controls, t0, dtype)
     q0 = check_q(scene, q0, dtype)
+    qdot0 = _check_qdot(scene, qdot0, dtype)
+    scene, damping, opts, span, ts = _prepare(
+        scene, t0, t1, saveat, damping, solver, rtol, atol, max_steps, dense, phi_inertia, adjoint
+    )
+    q0 = _aligned_rest_start(scene, controls, q0, qdot0, span[0])
+    dt0 = None if dt0 is None else jnp.asarray(dt0, dtype)
+    return _simulate(scene, damping, controls, q0, qdot0, span, ts, dt0, opts)
+
+
+def _check_qdot(scene: Scene, qdot0, dtype):
     if qdot0 is None:
-        qdot0 = jnp.zeros(scene.n_dofs, dtype)
-    elif np.shape(qdot0) != (scene.n_dofs,):
+        return jnp.zeros(scene.n_dofs, dtype)
+    if np.shape(qdot0) != (scene.n_dofs,):
         raise ValueError(f"qdot0 must have shape ({scene.n_dofs},), got {np.shape(qdot0)}")
-    qdot0 = jnp.asarray(qdot0, dtype)
+    return jnp.asarray(qdot0, dtype)
+
+
+def _prepare(
+    scene, t0, t1, saveat, damping, solver, rtol, atol, max_steps, dense, phi_inertia, adjoint
+):
+    """What one simulation and a batch share: the checked body, times, damping and options."""
+    dtype = solver_dtype(scene)
+    _check_body(scene)
+    ts = _check_saveat(saveat, t0, t1)
     if not (rtol > 0 and atol > 0):
         raise ValueError(f"rtol and atol must be > 0, got {rtol}, {atol}")
     if max_steps < 1:
@@ -373,10 +441,101 @@ def simulate(
         phi_inertia=float(phi_inertia),
         adjoint=diffrax.RecursiveCheckpointAdjoint() if adjoint is None else adjoint,
     )
-    q0 = _aligned_rest_start(scene, controls, q0, qdot0, jnp.asarray(t0, dtype))
     span = jnp.asarray([t0, t1], dtype)
+    return scene, damping, opts, span, jnp.asarray(ts, dtype)
+
+
+def simulate_batch(
+    scene: Scene,
+    t_span,
+    controls=None,
+    q0=None,
+    qdot0=None,
+    saveat=None,
+    *,
+    damping: Damping | None = None,
+    solver: diffrax.AbstractSolver | None = None,
+    rtol: float = 1e-7,
+    atol: float = 1e-9,
+    dt0=None,
+    max_steps: int = 100_000,
+    phi_inertia: float = PHI_INERTIA_FACTOR,
+    devices: int | None = None,
+) -> Trajectory:
+    """Many simulations of one scene at once (datasets, learning, sweeps over commands).
+
+    Args:
+        controls: ``(b, n_tendons)`` constant controls, one row per simulation; or one set for
+            all, ``(n_tendons,)`` or a schedule ``t -> (n_tendons,)`` as in :func:`simulate`.
+        q0, qdot0: ``(b, n_dofs)`` initial states, or one ``(n_dofs,)`` for all (default
+            straight and at rest). The batch size ``b`` is that of the batched arguments (at
+            least one of ``controls``, ``q0``, ``qdot0`` has a row per simulation).
+        devices: local devices to split the rows over (default all); the rows are padded to a
+            multiple of it.
+        Everything else as in :func:`simulate` (no dense output).
+
+    Returns:
+        A :class:`Trajectory` whose fields have a leading batch axis (``q``: ``(b, k, n_dofs)``,
+        ``result`` and the step counts ``(b,)``). The rows are one vectorised integration:
+        every row takes as many steps as the row that needs most (its own steps are accepted,
+        or rejected and retried, by its own error estimate), so rows of similar stiffness batch
+        best.
+    """
+    check_scene(scene)
+    dtype = solver_dtype(scene)
+    t0, t1 = _check_span(t_span)
+    n, m = scene.n_dofs, scene.n_tendons
+    rows = {
+        name: np.shape(x)[0]
+        for name, x, width in (("controls", controls, m), ("q0", q0, n), ("qdot0", qdot0, n))
+        if x is not None and not callable(x) and np.ndim(x) == 2 and np.shape(x)[1] == width
+    }
+    if not rows:
+        raise ValueError(
+            f"simulate_batch needs one row per simulation in controls (b, {m}), q0 (b, {n}) "
+            f"or qdot0 (b, {n}); got none with two axes (use simulate for one)"
+        )
+    if len(set(rows.values())) != 1:
+        raise ValueError(f"the batched arguments disagree on the batch size: {rows}")
+    b = next(iter(rows.values()))
+    if b == 0:
+        raise ValueError("simulate_batch needs at least one row")
+
+    def rows_of(x, check, name):
+        if name in rows:
+            return jnp.stack([check(r) for r in np.asarray(x)])
+        one = check(x)
+        return jnp.broadcast_to(one, (b,) + one.shape)
+
+    u = controls
+    if not callable(controls):
+        u = rows_of(controls, lambda x: _check_controls(scene, x, t0, dtype), "controls")
+    q = rows_of(q0, lambda x: check_q(scene, x, dtype), "q0")
+    v = rows_of(qdot0, lambda x: _check_qdot(scene, x, dtype), "qdot0")
+    scene, damping, opts, span, ts = _prepare(
+        scene, t0, t1, saveat, damping, solver, rtol, atol, max_steps, False, phi_inertia, None
+    )
+    n_devices = check_devices(devices)
+    padded = -(-b // n_devices) * n_devices
+    batched = (u, q, v) if not callable(u) else (q, v)
+    batched = jtu.tree_map(lambda x: jnp.asarray(pad_rows(np.asarray(x), padded)), batched)
+    sharding = row_sharding(n_devices)
+    if sharding is not None:
+        batched = jax.device_put(batched, sharding)
     dt0 = None if dt0 is None else jnp.asarray(dt0, dtype)
-    return _simulate(scene, damping, controls, q0, qdot0, span, jnp.asarray(ts, dtype), dt0, opts)
+    schedule = u if callable(u) else None
+    traj = _simulate_rows(scene, damping, schedule, batched, span, ts, dt0, opts)
+    return jtu.tree_map(lambda x: x[:b], traj)
+
+
+@eqx.filter_jit
+def _simulate_rows(scene, damping, schedule, batched, span, ts, dt0, opts):
+    def one(row):
+        u, q, v = row if schedule is None else (schedule, *row)
+        q = _aligned_rest_start(scene, u, q, v, span[0])
+        return _simulate(scene, damping, u, q, v, span, ts, dt0, opts)
+
+    return jax.vmap(one)(batched)
 
 
 def _check_body(scene: Scene) -> None:
@@ -487,6 +646,19 @@ def _vector_field(t, y, args):
     q, qdot = y
     u, udot = _control_fn(controls, model.scene.n_tendons, q.dtype)(t)
     return qdot, model.accelerations(q, qdot, u, udot)
+
+
+def _vector_field_jacobian(t, y, args):
+    """:meth:`_Model.frozen_inertia_jacobian` along the flattened state ``(q, qdot)``."""
+    model, controls = args
+    q, qdot = y
+    u, udot = _control_fn(controls, model.scene.n_tendons, q.dtype)(t)
+    return model.frozen_inertia_jacobian(q, qdot, u, udot)
+
+
+def rosenbrock23() -> Rosenbrock23:
+    """:class:`Rosenbrock23` with the dynamics' frozen-inertia Jacobian."""
+    return Rosenbrock23(jacobian=_vector_field_jacobian)
 
 
 @eqx.filter_jit

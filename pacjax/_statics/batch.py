@@ -62,7 +62,8 @@ def _nearest_rows(done_controls: np.ndarray, controls: np.ndarray) -> np.ndarray
     return np.argmin(d2, axis=1)
 
 
-def _sharding(n_devices: int):
+def row_sharding(n_devices: int) -> NamedSharding | None:
+    """Rows (the leading axis) split over the first ``n_devices`` local devices; None for one."""
     if n_devices <= 1:
         return None
     mesh = Mesh(np.asarray(jax.local_devices()[:n_devices]), ("batch",))
@@ -106,9 +107,9 @@ def iter_batch(
         raise ValueError("controls_batch is empty")
     q0 = check_q(scene, q0, dtype, rows=n)
     params = _check_params(params, update, n)
-    n_devices = _check_devices(devices)
+    n_devices = check_devices(devices)
     chunk = max(1, min(chunk_size, n))
-    sharding = _sharding(n_devices)
+    sharding = row_sharding(n_devices)
     lanes = pool_lanes(chunk, sharding, warm_start)
     slots = pool_slots(-(-chunk // lanes), n_devices)
 
@@ -151,7 +152,7 @@ def _check_params(params, update, n: int):
     return params
 
 
-def _check_devices(devices: int | None) -> int:
+def check_devices(devices: int | None) -> int:
     """How many local devices to shard over (default all)."""
     n_devices = len(jax.local_devices()) if devices is None else devices
     if not 1 <= n_devices <= len(jax.local_devices()):

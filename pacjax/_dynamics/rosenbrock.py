@@ -1,0 +1,106 @@
+"""A linearly implicit (Rosenbrock-W) solver for diffrax: Shampine and Reichelt's ode23s.
+
+diffrax's stiff solvers are implicit Runge-Kutta methods: every stage is a nonlinear solve,
+several vector-field evaluations each, and the Jacobian they linearise with is the exact one of
+the whole vector field. On pacjax's dynamics that Jacobian costs about fifteen vector fields
+(its mass matrix and Coriolis forces are derivatives of the kinematics already), and each step
+needs several more for its stages. A Rosenbrock method solves one linear system per stage
+instead, with a matrix ``W = I - h d J`` factorised once per step; as a W-method (Steihaug and
+Wolfbrandt) ode23s keeps its order with any ``J``, so ``J`` may leave out what is expensive and
+not stiff (the derivatives of the mass matrix and of the Coriolis forces): only its stability
+relies on ``J`` holding the stiff part. Per step: one ``J``, one LU factorisation, two new
+vector fields (the third is the next step's first), three triangular solves.
+
+The method (L. F. Shampine, M. W. Reichelt, "The MATLAB ODE suite", SIAM J. Sci. Comput. 18(1),
+1997), ``d = 1 / (2 + sqrt 2)``, ``T = df/dt``:
+
+    F0 = f(t0, y0)                          k1 = W^-1 (F0 + h d T)
+    F1 = f(t0 + h/2, y0 + h/2 k1)           k2 = W^-1 (F1 - k1) + k1
+    y1 = y0 + h k2                          F2 = f(t1, y1)
+    k3 = W^-1 (F2 - (6 + sqrt 2)(k2 - F1) - 2 (k1 - F0) + h d T)
+    error = h / 6 (k1 - 2 k2 + k3)
+
+Second order, L-stable, with a third-order error estimate; dense output is the cubic Hermite
+interpolant of ``y0, y1, F0, F2``. It suits the moderate tolerances (1e-3 to 1e-5) of control
+and learning; for tight ones an implicit Runge-Kutta method of higher order takes fewer steps.
+"""
+
+import math
+from collections.abc import Callable
+from typing import ClassVar
+
+import diffrax
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jax.flatten_util import ravel_pytree
+
+_D = 1.0 / (2.0 + math.sqrt(2.0))
+_E32 = 6.0 + math.sqrt(2.0)
+
+
+class Rosenbrock23(diffrax.AbstractAdaptiveSolver):
+    """Shampine and Reichelt's ode23s, a Rosenbrock-W method (see the module).
+
+    Attributes:
+        jacobian: ``(t, y, args) -> J``, the ``(n, n)`` Jacobian (or a W-method's stand-in for
+            it) of the vector field along the flattened state (``jax.flatten_util.ravel_pytree``
+            order). None: the exact one, by forward-mode differentiation of the vector field.
+    """
+
+    term_structure: ClassVar = diffrax.AbstractTerm
+    interpolation_cls: ClassVar[Callable[..., diffrax.ThirdOrderHermitePolynomialInterpolation]] = (
+        diffrax.ThirdOrderHermitePolynomialInterpolation
+    )
+    jacobian: Callable | None = eqx.field(static=True, default=None)
+
+    def order(self, terms):
+        return 2
+
+    def error_order(self, terms):
+        return 3
+
+    def init(self, terms, t0, t1, y0, args):
+        # First same as last: the solver state is the vector field at the current state.
+        return terms.vf(t0, y0, args)
+
+    def func(self, terms, t0, y0, args):
+        return terms.vf(t0, y0, args)
+
+    def step(self, terms, t0, t1, y0, args, solver_state, made_jump):
+        if made_jump is False:  # resolved when traced: no second copy of the vector field
+            f0_tree = solver_state
+        else:
+            f0_tree = jax.lax.cond(made_jump, lambda: terms.vf(t0, y0, args), lambda: solver_state)
+        x0, unravel = ravel_pytree(y0)
+
+        def f(t, x):
+            return ravel_pytree(terms.vf(t, unravel(x), args))[0]
+
+        f0 = ravel_pytree(f0_tree)[0]
+        h = t1 - t0
+        if self.jacobian is None:
+            jac = jax.jacfwd(lambda x: f(t0, x))(x0)
+        else:
+            jac = self.jacobian(t0, y0, args)
+        # Neither W nor T carry gradients: the step's derivative is that of the method with W
+        # held fixed, a W-method's own (diffrax's implicit solvers stop them the same way).
+        jac = jax.lax.stop_gradient(jac)
+        rate = jax.lax.stop_gradient(jax.jvp(lambda t: f(t, x0), (t0,), (jnp.ones_like(t0),))[1])
+        lu = jax.scipy.linalg.lu_factor(jnp.eye(x0.size, dtype=x0.dtype) - (h * _D) * jac)
+
+        def solve(b):
+            return jax.scipy.linalg.lu_solve(lu, b)
+
+        hdt = (h * _D) * rate
+        k1 = solve(f0 + hdt)
+        f1 = f(t0 + 0.5 * h, x0 + (0.5 * h) * k1)
+        k2 = solve(f1 - k1) + k1
+        x1 = x0 + h * k2
+        f2_tree = terms.vf(t1, unravel(x1), args)
+        f2 = ravel_pytree(f2_tree)[0]
+        k3 = solve(f2 - _E32 * (k2 - f1) - 2.0 * (k1 - f0) + hdt)
+        error = (h / 6.0) * (k1 - 2.0 * k2 + k3)
+        y1 = unravel(x1)
+        dense_info = dict(y0=y0, y1=y1, k0=unravel(h * f0), k1=unravel(h * f2))
+        return y1, unravel(error), dense_info, f2_tree, diffrax.RESULTS.successful

@@ -1,0 +1,137 @@
+"""The Rosenbrock-W solver (``pacjax._dynamics.rosenbrock``) and the dynamics' frozen-inertia
+Jacobian it is given by default."""
+
+import diffrax
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from dynamics_scenes import CONTROLS, SCENE
+
+import pacjax as pj
+from pacjax._dynamics.rosenbrock import Rosenbrock23
+from pacjax._dynamics.simulate import _Model, _vector_field, _vector_field_jacobian
+from pacjax._model.inputs import as_traced_leaves
+
+A = jnp.array([[-1.0, 2.0], [-3.0, -50.0]])
+
+
+def _forced_linear(t, y, args):
+    return A @ y + jnp.array([jnp.sin(3.0 * t), 0.0])
+
+
+def _end_error(jacobian, n_steps: int, reference) -> float:
+    sol = diffrax.diffeqsolve(
+        diffrax.ODETerm(_forced_linear),
+        Rosenbrock23(jacobian=jacobian),
+        0.0,
+        1.0,
+        1.0 / n_steps,
+        jnp.array([1.0, 1.0]),
+        stepsize_controller=diffrax.ConstantStepSize(),
+    )
+    return float(jnp.max(jnp.abs(sol.ys[-1] - reference)))
+
+
+@pytest.mark.parametrize(
+    "jacobian",
+    [None, lambda t, y, args: 0.8 * A, lambda t, y, args: jnp.diag(jnp.diag(A))],
+    ids=["exact", "scaled", "diagonal"],
+)
+def test_second_order_with_any_jacobian(jacobian):
+    """A W-method: halving the step quarters the error whatever matrix stands in for the
+    Jacobian (a non-autonomous problem, so the time derivative term counts too)."""
+    reference = diffrax.diffeqsolve(
+        diffrax.ODETerm(_forced_linear),
+        diffrax.Kvaerno5(),
+        0.0,
+        1.0,
+        1e-3,
+        jnp.array([1.0, 1.0]),
+        stepsize_controller=diffrax.PIDController(rtol=1e-12, atol=1e-14),
+        max_steps=100_000,
+    ).ys[-1]
+    errors = np.array([_end_error(jacobian, n, reference) for n in (40, 80, 160, 320)])
+    orders = np.log2(errors[:-1] / errors[1:])
+    np.testing.assert_allclose(orders, 2.0, atol=0.1)
+
+
+def test_stiff_van_der_pol_matches_kvaerno5():
+    """mu = 1000: L-stable steps through the fast transitions, dense output between them."""
+
+    def vf(t, y, mu):
+        x, v = y
+        return v, mu * (1 - x**2) * v - x
+
+    ts = jnp.linspace(0.0, 3000.0, 7)
+    ys = {}
+    for name, solver in (("ros", Rosenbrock23()), ("kv5", diffrax.Kvaerno5())):
+        sol = diffrax.diffeqsolve(
+            diffrax.ODETerm(vf),
+            solver,
+            0.0,
+            3000.0,
+            None,
+            (jnp.array(2.0), jnp.array(0.0)),
+            args=1000.0,
+            saveat=diffrax.SaveAt(ts=ts, dense=True),
+            stepsize_controller=diffrax.PIDController(rtol=1e-6, atol=1e-8),
+            max_steps=100_000,
+        )
+        assert sol.result == diffrax.RESULTS.successful
+        ys[name] = (sol.ys[0], jax.vmap(sol.evaluate)(ts + 0.5)[0])
+    np.testing.assert_allclose(ys["ros"][0], ys["kv5"][0], atol=2e-4)
+    np.testing.assert_allclose(ys["ros"][1], ys["kv5"][1], atol=2e-4)
+
+
+@pytest.mark.slow  # the exact Jacobian compiles the kinematics' third derivatives (2.5 min)
+def test_frozen_inertia_jacobian_is_exact_where_the_inertia_is_still():
+    """At rest in an equilibrium (no Coriolis forces, whose derivative in ``qdot`` vanishes
+    there, and no net force for the mass matrix's derivative to act on), freezing the inertia
+    leaves nothing out: the Jacobian equals the vector field's own. At rest anywhere, its
+    velocity columns do (the Coriolis forces are quadratic in ``qdot``)."""
+    scene = as_traced_leaves(SCENE, jnp.float64)
+    eq = pj.solve_equilibrium(SCENE, CONTROLS, tol=1e-12)
+    model = _Model.build(scene, pj.Damping.modal(SCENE), 1e-6, jnp.float64)
+    args = (model, CONTROLS)
+    n = scene.n_dofs
+
+    @jax.jit
+    def exact(q, qdot):
+        flat = jnp.concatenate([q, qdot])
+        return jax.jacfwd(lambda x: jnp.concatenate(_vector_field(0.0, (x[:n], x[n:]), args)))(flat)
+
+    rest = jnp.zeros_like(eq.q)
+    frozen = _vector_field_jacobian(0.0, (eq.q, rest), args)
+    scale = float(jnp.abs(frozen).max())
+    np.testing.assert_allclose(frozen, exact(eq.q, rest), rtol=1e-8, atol=1e-9 * scale)
+    bent = eq.q + 0.05
+    np.testing.assert_allclose(
+        _vector_field_jacobian(0.0, (bent, rest), args)[:, n:],
+        exact(bent, rest)[:, n:],
+        rtol=1e-8,
+        atol=1e-9 * scale,
+    )
+
+
+@pytest.mark.slow  # Kvaerno5 at rtol 1e-9 as the reference (2.5 min on 2 cores)
+def test_simulate_with_rosenbrock_matches_the_default_solver():
+    start = pj.solve_equilibrium(SCENE, jnp.zeros(2), tol=1e-12)
+    runs = {}
+    for name, solver, rtol in (("ros", pj.dynamics.rosenbrock23(), 1e-6), ("kv5", None, 1e-9)):
+        runs[name] = pj.simulate(
+            SCENE,
+            (0.0, 0.1),
+            CONTROLS,
+            q0=start.q,
+            saveat=[0.05, 0.1],
+            solver=solver,
+            rtol=rtol,
+            atol=rtol * 1e-2,
+        )
+        assert bool(runs[name].successful)
+    tips = {
+        k: np.asarray(jax.vmap(lambda q: pj.tip_pose(SCENE, q)[0])(r.q)) for k, r in runs.items()
+    }
+    assert np.max(np.abs(tips["ros"] - tips["kv5"])) < 1e-5  # m
+    assert np.max(np.abs(tips["kv5"][0] - pj.tip_pose(SCENE, start.q)[0])) > 1e-3  # it moved

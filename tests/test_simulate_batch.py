@@ -1,0 +1,37 @@
+"""``pj.simulate_batch``: rows of one vectorised integration, each equal to its own simulation."""
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from dynamics_scenes import SCENE
+
+import pacjax as pj
+
+COMMANDS = np.array([[0.008, 0.002], [0.0, 0.006], [0.004, 0.0]])
+
+
+@pytest.mark.slow  # two programs of the dynamics to compile (1 min on 2 cores)
+def test_rows_equal_their_own_simulations():
+    kwargs = dict(saveat=[0.01, 0.02], solver=pj.dynamics.rosenbrock23(), rtol=1e-6, atol=1e-8)
+    q0 = np.zeros((3, SCENE.n_dofs))
+    q0[1, 0] = 0.3  # one row starts bent
+    batch = pj.simulate_batch(SCENE, (0.0, 0.02), COMMANDS, q0, **kwargs)
+    assert batch.q.shape == (3, 2, SCENE.n_dofs) and batch.result.shape == (3,)
+    assert bool(jnp.all(batch.successful))
+    for i in range(3):
+        single = pj.simulate(SCENE, (0.0, 0.02), COMMANDS[i], q0[i], **kwargs)
+        np.testing.assert_allclose(batch.q[i], single.q, rtol=0, atol=1e-12)
+        assert int(batch.num_steps[i]) == int(single.num_steps)
+    # Rows with different commands take their own steps.
+    assert len(set(np.asarray(batch.num_steps).tolist())) > 1
+
+
+def test_batch_arguments_are_checked_before_compiling():
+    with pytest.raises(ValueError, match="one row per simulation"):
+        pj.simulate_batch(SCENE, (0.0, 0.01), COMMANDS[0])
+    with pytest.raises(ValueError, match="disagree on the batch size"):
+        pj.simulate_batch(SCENE, (0.0, 0.01), COMMANDS, np.zeros((2, SCENE.n_dofs)))
+    with pytest.raises(ValueError, match="t_span"):
+        pj.simulate_batch(SCENE, (0.1, 0.0), COMMANDS)
+    with pytest.raises(ValueError, match="devices"):
+        pj.simulate_batch(SCENE, (0.0, 0.01), COMMANDS, devices=99)
