@@ -33,5 +33,9 @@ def test_batch_arguments_are_checked_before_compiling():
         pj.simulate_batch(SCENE, (0.0, 0.01), COMMANDS, np.zeros((2, SCENE.n_dofs)))
     with pytest.raises(ValueError, match="t_span"):
         pj.simulate_batch(SCENE, (0.1, 0.0), COMMANDS)
+    bad = COMMANDS.copy()
+    bad[2, 0] = np.nan
+    with pytest.raises(ValueError, match=r"controls\[2\]"):
+        pj.simulate_batch(SCENE, (0.0, 0.01), bad)
     with pytest.raises(ValueError, match="devices"):
         pj.simulate_batch(SCENE, (0.0, 0.01), COMMANDS, devices=99)

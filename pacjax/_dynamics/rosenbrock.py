@@ -20,9 +20,11 @@ The method (L. F. Shampine, M. W. Reichelt, "The MATLAB ODE suite", SIAM J. Sci.
     k3 = W^-1 (F2 - (6 + sqrt 2)(k2 - F1) - 2 (k1 - F0) + h d T)
     error = h / 6 (k1 - 2 k2 + k3)
 
-Second order, L-stable, with a third-order error estimate; dense output is the cubic Hermite
-interpolant of ``y0, y1, F0, F2``. It suits the moderate tolerances (1e-3 to 1e-5) of control
-and learning; for tight ones an implicit Runge-Kutta method of higher order takes fewer steps.
+Second order, L-stable; dense output is the cubic Hermite interpolant of ``y0, y1, F0, F2``.
+The error estimate is of third order with the exact Jacobian and of second with a stand-in, so
+the step shrinks faster with the tolerance than a second-order method's must. It suits the
+moderate tolerances (1e-3 to 1e-5) of control and learning; for tight ones an implicit
+Runge-Kutta method of higher order takes fewer steps.
 """
 
 import math

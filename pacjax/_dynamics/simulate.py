@@ -21,14 +21,17 @@
   ``kappa_D = beta kappa_P`` damps the tendon springs like the body (stiffness-proportional).
   Tension-mode tendons pull with the commanded tension.
 
-The state ``(q, qdot)`` is integrated by an implicit Runge-Kutta method (default
-``diffrax.Kvaerno5``, L-stable, 5th order) with adaptive steps (PID controller): the tendon
-springs are stiff against the soft body. Its stage equations are solved by diffrax's chord
-method with the Jacobian taken in forward mode (:class:`pacjax._chord.DenseChord`), and the
-vector field is jitted on its own, so that its trace and its derivatives' are made once: the
-same steps as diffrax's stock solver, traced and compiled in about half the time. Gradients of
-a trajectory with respect to any scene or damping parameter, the initial state or the controls
-go through diffrax's checkpointed adjoint.
+The state ``(q, qdot)`` is integrated with adaptive steps (PID controller) by a stiff solver:
+the tendon springs, the axial stiffness and the stiffness-proportional damping are fast against
+the soft body's motion. At moderate tolerances (``rtol >= 1e-5``) the default is
+:class:`pacjax._dynamics.rosenbrock.Rosenbrock23`, a linearly implicit W-method, with the
+frozen-inertia Jacobian (:meth:`_Model.frozen_inertia_jacobian`): the potential's Hessian and
+the damping, without the inertia's derivatives, which are slow and the dearest part of an exact
+Jacobian. At tight ones it is ``diffrax.Kvaerno5`` (L-stable, 5th order), whose stage equations
+are solved by diffrax's chord method with the Jacobian taken in forward mode
+(:class:`pacjax._chord.DenseChord`). The vector field is jitted on its own, so that its trace and
+its derivatives' are made once. Gradients of a trajectory with respect to any scene or damping
+parameter, the initial state or the controls go through diffrax's checkpointed adjoint.
 """
 
 import math
@@ -367,10 +370,12 @@ def simulate(
         saveat: times (s) to save at (default 101 evenly spaced over ``t_span``).
         damping: a :class:`Damping`; default :meth:`Damping.modal` (5 % on the lowest mode,
             stiffness-proportional, motors ``kappa_D = beta kappa_P``). ``Damping()``: none.
-        solver: a diffrax solver (default ``diffrax.Kvaerno5`` with
-            :class:`pacjax._chord.DenseChord`, diffrax's chord method with a forward-mode
-            Jacobian; a non-stiff one such as ``diffrax.Tsit5()`` only suits scenes without
-            stiff tendons).
+        solver: a diffrax solver. Default: for ``rtol >= 1e-5``, :func:`rosenbrock23` (a
+            linearly implicit method with the dynamics' stiff Jacobian: cheap steps for
+            control and learning); tighter, ``diffrax.Kvaerno5`` with
+            :class:`pacjax._chord.DenseChord` (diffrax's chord method with a forward-mode
+            Jacobian). A non-stiff solver such as ``diffrax.Tsit5()`` only suits scenes without
+            stiff tendons or damping.
         rtol, atol: tolerances of the adaptive step size (``atol`` in the state's SI units).
         dt0: first step (s); default chosen by the solver.
         max_steps: step limit (beyond it the trajectory's ``result`` is
@@ -433,7 +438,7 @@ def _prepare(
     scene = static_load_sites(as_traced_leaves(scene, dtype))
     damping = _check_damping(scene, damping)
     opts = _Options(
-        solver=kvaerno5() if solver is None else solver,
+        solver=default_solver(rtol) if solver is None else solver,
         rtol=float(rtol),
         atol=float(atol),
         max_steps=int(max_steps),
@@ -503,7 +508,13 @@ def simulate_batch(
 
     def rows_of(x, check, name):
         if name in rows:
-            return jnp.stack([check(r) for r in np.asarray(x)])
+            checked = []
+            for i, row in enumerate(np.asarray(x)):
+                try:
+                    checked.append(check(row))
+                except ValueError as err:
+                    raise ValueError(f"{name}[{i}]: {err}") from None
+            return jnp.stack(checked)
         one = check(x)
         return jnp.broadcast_to(one, (b,) + one.shape)
 
@@ -657,8 +668,20 @@ def _vector_field_jacobian(t, y, args):
 
 
 def rosenbrock23() -> Rosenbrock23:
-    """:class:`Rosenbrock23` with the dynamics' frozen-inertia Jacobian."""
+    """:class:`Rosenbrock23` with the dynamics' frozen-inertia Jacobian
+    (:meth:`_Model.frozen_inertia_jacobian`): :func:`simulate`'s solver at moderate tolerances."""
     return Rosenbrock23(jacobian=_vector_field_jacobian)
+
+
+#: ``rtol`` from which :func:`simulate` takes :func:`rosenbrock23` by default (Kvaerno5 below).
+ROSENBROCK_RTOL = 1e-5
+
+
+def default_solver(rtol: float) -> diffrax.AbstractSolver:
+    """:func:`rosenbrock23` from ``rtol >= ROSENBROCK_RTOL``: one Jacobian, one factorisation
+    and two vector fields a step; below it Kvaerno5 with :class:`pacjax._chord.DenseChord`, whose
+    fifth order takes fewer (dearer) steps to a tight tolerance."""
+    return rosenbrock23() if rtol >= ROSENBROCK_RTOL else kvaerno5()
 
 
 @eqx.filter_jit
