@@ -1,5 +1,6 @@
 """Dynamics: the paper's full model (its eq. 7) integrated in time (see :func:`simulate`)."""
 
+from ._dynamics.batch import simulate_batch as simulate_batch
 from ._dynamics.damping import DEFAULT_DAMPING_RATIO as DEFAULT_DAMPING_RATIO
 from ._dynamics.damping import Damping as Damping
 from ._dynamics.rosenbrock import Rosenbrock23 as Rosenbrock23
@@ -8,5 +9,4 @@ from ._dynamics.simulate import accelerations as accelerations
 from ._dynamics.simulate import natural_frequencies as natural_frequencies
 from ._dynamics.simulate import rosenbrock23 as rosenbrock23
 from ._dynamics.simulate import simulate as simulate
-from ._dynamics.simulate import simulate_batch as simulate_batch
 from ._dynamics.simulate import total_energy as total_energy

@@ -16,7 +16,7 @@ def test_rows_equal_their_own_simulations():
     q0 = np.zeros((3, SCENE.n_dofs))
     q0[1, 0] = 0.3  # one row starts bent
     batch = pj.simulate_batch(SCENE, (0.0, 0.02), COMMANDS, q0, **kwargs)
-    assert batch.q.shape == (3, 2, SCENE.n_dofs) and batch.result.shape == (3,)
+    assert batch.q.shape == (3, 2, SCENE.n_dofs) and batch.successful.shape == (3,)
     assert bool(jnp.all(batch.successful))
     for i in range(3):
         single = pj.simulate(SCENE, (0.0, 0.02), COMMANDS[i], q0[i], **kwargs)

@@ -121,25 +121,25 @@ def test_aligned_start_reaches_the_same_equilibria_in_fewer_steps(model):
 def test_simulation_start_turns_straight_segments_at_rest_only():
     import jax
 
-    from pacjax._dynamics.simulate import _aligned_rest_start
+    from pacjax._dynamics.simulate import aligned_rest_start
 
     scene = pj.presets.stella2023(pj.PAC(), tip_mass=0.2)
     u = jnp.asarray(_pull(0, 0) + _pull(2, 1))
     zero = jnp.zeros(scene.n_dofs)
-    start = np.asarray(_aligned_rest_start(scene, u, zero, zero, jnp.asarray(0.0)))
+    start = np.asarray(aligned_rest_start(scene, u, zero, zero, jnp.asarray(0.0)))
     start = start.reshape(3, 4)
     assert np.cos(2 * (start[0, 2] - ANGLES[0])) == pytest.approx(1.0, abs=1e-12)
     assert np.cos(2 * (start[2, 2] - ANGLES[1])) == pytest.approx(1.0, abs=1e-12)
     assert start[1, 2] == start[0, 2]  # no force on it: the plane of the segment before
     # A straight segment already bending (c0 rate) keeps the plane of its velocity.
     qdot = zero.at[8].set(0.3)
-    moving = np.asarray(_aligned_rest_start(scene, u, zero, qdot, jnp.asarray(0.0)))
+    moving = np.asarray(aligned_rest_start(scene, u, zero, qdot, jnp.asarray(0.0)))
     assert moving.reshape(3, 4)[2, 2] == 0.0
     # Controls given as a function of time are read at t0.
-    at_t0 = _aligned_rest_start(scene, lambda t: u * (1.0 + t), zero, zero, jnp.asarray(0.0))
+    at_t0 = aligned_rest_start(scene, lambda t: u * (1.0 + t), zero, zero, jnp.asarray(0.0))
     np.testing.assert_array_equal(np.asarray(at_t0), start.reshape(-1))
     # Only the coordinates of the same configuration change: d(start)/d(q0) is the identity.
-    jac = jax.jacfwd(lambda q: _aligned_rest_start(scene, u, q, zero, jnp.asarray(0.0)))(zero)
+    jac = jax.jacfwd(lambda q: aligned_rest_start(scene, u, q, zero, jnp.asarray(0.0)))(zero)
     np.testing.assert_array_equal(np.asarray(jac), np.eye(scene.n_dofs))
 
 

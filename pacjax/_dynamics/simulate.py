@@ -41,7 +41,6 @@ import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import jax.tree_util as jtu
 import lineax as lx
 import numpy as np
 from jaxtyping import Array, Bool, Float, Int
@@ -70,8 +69,6 @@ from .._model.kinematics import jacobian_and_value
 from .._model.robot import concrete
 from .._model.scene import Scene
 from .._results import RESULTS
-from .._statics.batch import check_devices, row_sharding
-from .._statics.pool import pad_rows
 from .._statics.problem import ScaledProblem
 from .damping import DEFAULT_DAMPING_RATIO, Damping, generalised_eigenvalues
 from .rosenbrock import Rosenbrock23
@@ -80,7 +77,6 @@ __all__ = [
     "Damping",
     "Trajectory",
     "simulate",
-    "simulate_batch",
     "Rosenbrock23",
     "rosenbrock23",
     "mass_matrix",
@@ -194,7 +190,7 @@ class _Model(eqx.Module):
         scene = self.scene
         mass = mass_matrix(scene, q, self.phi_inertia)
         d_q = -jax.hessian(scene.potential_energy)(q, u)
-        if self.passive.nonconservative_forces(q) is not None:
+        if not self.passive.is_conservative:
             d_q = d_q + jax.jacfwd(self.passive.nonconservative_forces)(q)
         d_qdot = -self.damping.stiffness * jax.jacfwd(self.material_damping, argnums=1)(q, qdot)
         d_qdot = d_qdot - self.damping.mass * mass
@@ -400,19 +396,19 @@ def simulate(
     """
     check_scene(scene)
     dtype = solver_dtype(scene)
-    t0, t1 = _check_span(t_span)
-    controls = _check_controls(scene, controls, t0, dtype)
+    t0, t1 = check_span(t_span)
+    controls = check_simulation_controls(scene, controls, t0, dtype)
     q0 = check_q(scene, q0, dtype)
-    qdot0 = _check_qdot(scene, qdot0, dtype)
-    scene, damping, opts, span, ts = _prepare(
+    qdot0 = check_qdot(scene, qdot0, dtype)
+    scene, damping, opts, span, ts = prepare(
         scene, t0, t1, saveat, damping, solver, rtol, atol, max_steps, dense, phi_inertia, adjoint
     )
-    q0 = _aligned_rest_start(scene, controls, q0, qdot0, span[0])
+    q0 = aligned_rest_start(scene, controls, q0, qdot0, span[0])
     dt0 = None if dt0 is None else jnp.asarray(dt0, dtype)
-    return _simulate(scene, damping, controls, q0, qdot0, span, ts, dt0, opts)
+    return integrate(scene, damping, controls, q0, qdot0, span, ts, dt0, opts)
 
 
-def _check_qdot(scene: Scene, qdot0, dtype):
+def check_qdot(scene: Scene, qdot0, dtype):
     if qdot0 is None:
         return jnp.zeros(scene.n_dofs, dtype)
     if np.shape(qdot0) != (scene.n_dofs,):
@@ -420,10 +416,11 @@ def _check_qdot(scene: Scene, qdot0, dtype):
     return jnp.asarray(qdot0, dtype)
 
 
-def _prepare(
+def prepare(
     scene, t0, t1, saveat, damping, solver, rtol, atol, max_steps, dense, phi_inertia, adjoint
 ):
-    """What one simulation and a batch share: the checked body, times, damping and options."""
+    """What one simulation and a batch (:mod:`pacjax._dynamics.batch`) share: the checked body,
+    times, damping and options."""
     dtype = solver_dtype(scene)
     _check_body(scene)
     ts = _check_saveat(saveat, t0, t1)
@@ -450,105 +447,6 @@ def _prepare(
     return scene, damping, opts, span, jnp.asarray(ts, dtype)
 
 
-def simulate_batch(
-    scene: Scene,
-    t_span,
-    controls=None,
-    q0=None,
-    qdot0=None,
-    saveat=None,
-    *,
-    damping: Damping | None = None,
-    solver: diffrax.AbstractSolver | None = None,
-    rtol: float = 1e-7,
-    atol: float = 1e-9,
-    dt0=None,
-    max_steps: int = 100_000,
-    phi_inertia: float = PHI_INERTIA_FACTOR,
-    devices: int | None = None,
-) -> Trajectory:
-    """Many simulations of one scene at once (datasets, learning, sweeps over commands).
-
-    Args:
-        controls: ``(b, n_tendons)`` constant controls, one row per simulation; or one set for
-            all, ``(n_tendons,)`` or a schedule ``t -> (n_tendons,)`` as in :func:`simulate`.
-        q0, qdot0: ``(b, n_dofs)`` initial states, or one ``(n_dofs,)`` for all (default
-            straight and at rest). The batch size ``b`` is that of the batched arguments (at
-            least one of ``controls``, ``q0``, ``qdot0`` has a row per simulation).
-        devices: local devices to split the rows over (default all); the rows are padded to a
-            multiple of it.
-        Everything else as in :func:`simulate` (no dense output).
-
-    Returns:
-        A :class:`Trajectory` whose fields have a leading batch axis (``q``: ``(b, k, n_dofs)``,
-        ``result`` and the step counts ``(b,)``). The rows are one vectorised integration:
-        every row takes as many steps as the row that needs most (its own steps are accepted,
-        or rejected and retried, by its own error estimate), so rows of similar stiffness batch
-        best.
-    """
-    check_scene(scene)
-    dtype = solver_dtype(scene)
-    t0, t1 = _check_span(t_span)
-    n, m = scene.n_dofs, scene.n_tendons
-    rows = {
-        name: np.shape(x)[0]
-        for name, x, width in (("controls", controls, m), ("q0", q0, n), ("qdot0", qdot0, n))
-        if x is not None and not callable(x) and np.ndim(x) == 2 and np.shape(x)[1] == width
-    }
-    if not rows:
-        raise ValueError(
-            f"simulate_batch needs one row per simulation in controls (b, {m}), q0 (b, {n}) "
-            f"or qdot0 (b, {n}); got none with two axes (use simulate for one)"
-        )
-    if len(set(rows.values())) != 1:
-        raise ValueError(f"the batched arguments disagree on the batch size: {rows}")
-    b = next(iter(rows.values()))
-    if b == 0:
-        raise ValueError("simulate_batch needs at least one row")
-
-    def rows_of(x, check, name):
-        if name in rows:
-            checked = []
-            for i, row in enumerate(np.asarray(x)):
-                try:
-                    checked.append(check(row))
-                except ValueError as err:
-                    raise ValueError(f"{name}[{i}]: {err}") from None
-            return jnp.stack(checked)
-        one = check(x)
-        return jnp.broadcast_to(one, (b,) + one.shape)
-
-    u = controls
-    if not callable(controls):
-        u = rows_of(controls, lambda x: _check_controls(scene, x, t0, dtype), "controls")
-    q = rows_of(q0, lambda x: check_q(scene, x, dtype), "q0")
-    v = rows_of(qdot0, lambda x: _check_qdot(scene, x, dtype), "qdot0")
-    scene, damping, opts, span, ts = _prepare(
-        scene, t0, t1, saveat, damping, solver, rtol, atol, max_steps, False, phi_inertia, None
-    )
-    n_devices = check_devices(devices)
-    padded = -(-b // n_devices) * n_devices
-    batched = (u, q, v) if not callable(u) else (q, v)
-    batched = jtu.tree_map(lambda x: jnp.asarray(pad_rows(np.asarray(x), padded)), batched)
-    sharding = row_sharding(n_devices)
-    if sharding is not None:
-        batched = jax.device_put(batched, sharding)
-    dt0 = None if dt0 is None else jnp.asarray(dt0, dtype)
-    schedule = u if callable(u) else None
-    traj = _simulate_rows(scene, damping, schedule, batched, span, ts, dt0, opts)
-    return jtu.tree_map(lambda x: x[:b], traj)
-
-
-@eqx.filter_jit
-def _simulate_rows(scene, damping, schedule, batched, span, ts, dt0, opts):
-    def one(row):
-        u, q, v = row if schedule is None else (schedule, *row)
-        q = _aligned_rest_start(scene, u, q, v, span[0])
-        return _simulate(scene, damping, u, q, v, span, ts, dt0, opts)
-
-    return jax.vmap(one)(batched)
-
-
 def _check_body(scene: Scene) -> None:
     """A body that has a mass matrix: mass on every segment, and a radius for twist."""
     for i, seg in enumerate(scene.robot.segments):
@@ -568,7 +466,7 @@ def _check_body(scene: Scene) -> None:
                 )
 
 
-def _check_controls(scene: Scene, controls, t0: float, dtype):
+def check_simulation_controls(scene: Scene, controls, t0: float, dtype):
     """Constant controls checked as a solve's; a schedule ``controls(t)`` by its output shape."""
     if not callable(controls):
         return check_controls(scene, controls, dtype)
@@ -595,7 +493,7 @@ def _check_damping(scene: Scene, damping) -> Damping:
 
 
 @eqx.filter_jit
-def _aligned_rest_start(scene: Scene, controls, q0, qdot0, t0):
+def aligned_rest_start(scene: Scene, controls, q0, qdot0, t0):
     """``q0`` with the bending plane of each straight PCC/PAC segment at rest turned to the
     force on it at ``t0`` (:meth:`pacjax._statics.problem.ScaledProblem.aligned`).
 
@@ -618,7 +516,7 @@ def _aligned_rest_start(scene: Scene, controls, q0, qdot0, t0):
     return q0 + jax.lax.stop_gradient(problem.sigma * y - q0)
 
 
-def _check_span(t_span) -> tuple[float, float]:
+def check_span(t_span) -> tuple[float, float]:
     span = np.asarray(t_span, dtype=float)
     if span.shape != (2,) or not np.all(np.isfinite(span)) or not span[1] > span[0]:
         raise ValueError(f"t_span must be (t0, t1) with finite t1 > t0, got {t_span!r}")
@@ -685,7 +583,9 @@ def default_solver(rtol: float) -> diffrax.AbstractSolver:
 
 
 @eqx.filter_jit
-def _simulate(scene, damping, controls, q0, qdot0, span, ts, dt0, opts: _Options):
+def integrate(scene, damping, controls, q0, qdot0, span, ts, dt0, opts: _Options):
+    """The compiled simulation of checked inputs (:func:`prepare`, :func:`aligned_rest_start`):
+    one row of :func:`pacjax._dynamics.batch.simulate_batch`."""
     model = _Model.build(scene, damping, opts.phi_inertia, q0.dtype)
     sol = diffrax.diffeqsolve(
         diffrax.ODETerm(_vector_field),
