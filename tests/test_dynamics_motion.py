@@ -18,9 +18,13 @@ from pacjax import dynamics as dyn
 from pacjax._model.inertia import kinetic_energy, mass_matrix
 
 
-@pytest.mark.long(minutes=1.6)
-@pytest.mark.slow  # 330 s on 2 cores beside another job
+@pytest.mark.long(minutes=0.7)
+@pytest.mark.slow
 def test_damped_motion_settles_on_equilibrium():
+    """A step to the tendon commands, modally damped at 0.7, settles on the statics' solution.
+    The tendons are springs of at most 55 Hz here, not stiff: an explicit solver takes 10,836
+    steps for the 4 s in 37 s on 2 cores (Kvaerno5: 1,104 steps, 99 s, 90 of them compiling),
+    and both end within 1e-13 of the equilibrium."""
     eq = pj.solve_equilibrium(SCENE, CONTROLS, tol=1e-12)
     assert bool(eq.converged)
     traj = pj.simulate(
@@ -29,6 +33,7 @@ def test_damped_motion_settles_on_equilibrium():
         CONTROLS,
         saveat=[0.0, 2.0, 4.0],
         damping=pj.Damping.modal(SCENE, 0.7),
+        solver=diffrax.Tsit5(),
         rtol=1e-9,
         atol=1e-11,
     )
@@ -38,9 +43,12 @@ def test_damped_motion_settles_on_equilibrium():
     assert float(jnp.max(jnp.abs(traj.qdot[-1]))) < 1e-5
 
 
-@pytest.mark.long(minutes=2.3)
-@pytest.mark.slow  # under 4 min on 2 cores (2026-11-27)
+@pytest.mark.long(minutes=1.0)
+@pytest.mark.slow
 def test_energy_is_conserved_over_100_periods():
+    """Undamped, without tendons: the total energy stays within 1e-6 of its start over 100
+    periods of the lowest mode. Dopri8 at rtol 1e-10 keeps it within 1.7e-9 (23,949 steps, 56 s
+    on 2 cores; at rtol 1e-12, 5e-11 in 40,509 steps and 95 s)."""
     scene = free_scene()
     period = 1.0 / float(dyn.natural_frequencies(scene)[0])
     q0 = jnp.zeros(scene.n_dofs).at[0].set(0.4).at[2].set(-0.2)
@@ -53,8 +61,8 @@ def test_energy_is_conserved_over_100_periods():
         saveat=np.linspace(0.0, 100 * period, 201),
         damping=pj.Damping(),
         solver=diffrax.Dopri8(),
-        rtol=1e-12,
-        atol=1e-14,
+        rtol=1e-10,
+        atol=1e-12,
     )
     assert bool(traj.successful)
     energy = jax.vmap(lambda q, v: dyn.total_energy(scene, q, v))(traj.q, traj.qdot)
