@@ -27,7 +27,7 @@ from dynamics_scenes import CONTROLS, SCENE, cantilever, small_scene
 
 import pacjax as pj
 from pacjax import dynamics as dyn
-from pacjax._dynamics import simulate as simulate_module
+from pacjax._dynamics.equations import EquationsOfMotion
 from pacjax._model.inertia import body_dynamics, coriolis_forces, kinetic_energy, mass_matrix
 
 RNG = np.random.default_rng(0)
@@ -73,7 +73,7 @@ def test_slack_tendon_cannot_push():
     q = jnp.zeros(SCENE.n_dofs)
     qdot = jnp.zeros(SCENE.n_dofs).at[0].set(5.0)  # bending fast: one tendon shortens
     controls = jnp.array([-0.01, -0.01])  # commands longer than the rest lengths: both slack
-    model = simulate_module._Model.build(SCENE, pj.Damping(stiffness=0.05), 1e-6, q.dtype)
+    model = EquationsOfMotion.build(SCENE, pj.Damping(stiffness=0.05), 1e-6, q.dtype)
     force = model.tendon_forces(q, qdot, controls, jnp.zeros(2))
     assert jnp.all(force == 0.0)
     # taut and stretching: the derivative gain adds to the pull
@@ -89,7 +89,7 @@ def test_material_damping_is_kelvin_voigt(frame):
     constant ``K_0``: a slow swing across the bending plane that lasted seconds)."""
     segment = pj.Segment(0.12, 0.02, 800.0, linear_density=0.3)
     scene = pj.Scene(pj.Robot([segment]), pj.PCC(frame=frame))
-    model = simulate_module._Model.build(scene, pj.Damping(stiffness=1.0), 1e-6, jnp.float64)
+    model = EquationsOfMotion.build(scene, pj.Damping(stiffness=1.0), 1e-6, jnp.float64)
     zero = jnp.zeros(scene.n_dofs)
 
     def damping_matrix(q):

@@ -9,8 +9,8 @@ import pytest
 from dynamics_scenes import CONTROLS, SCENE
 
 import pacjax as pj
+from pacjax._dynamics.equations import EquationsOfMotion, vector_field, vector_field_jacobian
 from pacjax._dynamics.rosenbrock import Rosenbrock23
-from pacjax._dynamics.simulate import _Model, _vector_field, _vector_field_jacobian
 from pacjax._model.inputs import as_traced_leaves
 
 A = jnp.array([[-1.0, 2.0], [-3.0, -50.0]])
@@ -123,22 +123,22 @@ def test_frozen_inertia_jacobian_is_exact_where_the_inertia_is_still():
     velocity columns do (the Coriolis forces are quadratic in ``qdot``)."""
     scene = as_traced_leaves(SCENE, jnp.float64)
     eq = pj.solve_equilibrium(SCENE, CONTROLS, tol=1e-12)
-    model = _Model.build(scene, pj.Damping.modal(SCENE), 1e-6, jnp.float64)
+    model = EquationsOfMotion.build(scene, pj.Damping.modal(SCENE), 1e-6, jnp.float64)
     args = (model, CONTROLS)
     n = scene.n_dofs
 
     @jax.jit
     def exact(q, qdot):
         flat = jnp.concatenate([q, qdot])
-        return jax.jacfwd(lambda x: jnp.concatenate(_vector_field(0.0, (x[:n], x[n:]), args)))(flat)
+        return jax.jacfwd(lambda x: jnp.concatenate(vector_field(0.0, (x[:n], x[n:]), args)))(flat)
 
     rest = jnp.zeros_like(eq.q)
-    frozen = _vector_field_jacobian(0.0, (eq.q, rest), args)
+    frozen = vector_field_jacobian(0.0, (eq.q, rest), args)
     scale = float(jnp.abs(frozen).max())
     np.testing.assert_allclose(frozen, exact(eq.q, rest), rtol=1e-8, atol=1e-9 * scale)
     bent = eq.q + 0.05
     np.testing.assert_allclose(
-        _vector_field_jacobian(0.0, (bent, rest), args)[:, n:],
+        vector_field_jacobian(0.0, (bent, rest), args)[:, n:],
         exact(bent, rest)[:, n:],
         rtol=1e-8,
         atol=1e-9 * scale,

@@ -1,61 +1,30 @@
-"""Dynamics: the paper's full model (its eq. 7), integrated with diffrax.
-
-    M(q) qddot + C(q, qdot) qdot + G(q) + D qdot + K(q) = A(q) f_act + Q_ext(q)
-
-- ``M`` and ``C qdot`` come from the kinetic energy of the body and point masses by automatic
-  differentiation (:mod:`pacjax._model.inertia`); ``G + K`` is the gradient of the scene's potential
-  energy without its tendons (elasticity, gravity, world-fixed forces); ``Q_ext`` the follower
-  forces and point moments.
-- ``D`` is Rayleigh damping (:class:`Damping`): ``alpha M(q) + beta K(q)``, with
-  ``K(q) = J(q)^T K_s J(q)`` the elastic stiffness seen by the strain rates (``J`` the strain
-  Jacobian, ``K_s`` the section stiffness): a Kelvin-Voigt material's damping, ``K_0`` at the
-  straight rest configuration. Default: stiffness-proportional, with ``beta`` giving a 5 %
-  damping ratio to the lowest mode of the straight, unloaded body.
-- Tendons: ``A(q) f_act = -(dl/dq)^T tau`` with the motor PD law
-  ``tau = max(kappa_P (l - l_bar) + kappa_D (l_dot - l_bar_dot), 0)``, ``l_bar = l_rest - u(t)``:
-  the paper's ``f_act = kappa_D (l_bar_dot - l_dot) + kappa_P (l_bar - l)`` taken as the pull of
-  the tendon, clipped at zero because a tendon cannot push. Clipping the sum (not gating it by
-  ``l > l_bar``) keeps the force continuous in the state, which the implicit solver needs;
-  at rest velocity it is exactly the statics' tension ``kappa_P max(l - l_bar, 0)``, so a
-  damped motion settles on :func:`pacjax.solve_equilibrium`'s state. The default
-  ``kappa_D = beta kappa_P`` damps the tendon springs like the body (stiffness-proportional).
-  Tension-mode tendons pull with the commanded tension.
+"""Dynamics: the paper's full model (its eq. 7, :mod:`pacjax._dynamics.equations`) integrated with
+diffrax.
 
 The state ``(q, qdot)`` is integrated with adaptive steps (PID controller) by a stiff solver:
 the tendon springs, the axial stiffness and the stiffness-proportional damping are fast against
 the soft body's motion. At moderate tolerances (``rtol >= 1e-5``) the default is
 :class:`pacjax._dynamics.rosenbrock.Rosenbrock23`, a linearly implicit W-method, with the
-frozen-inertia Jacobian (:meth:`_Model.frozen_inertia_jacobian`): the potential's Hessian and
-the damping, without the inertia's derivatives, which are slow and the dearest part of an exact
-Jacobian. At tight ones it is ``diffrax.Kvaerno5`` (L-stable, 5th order), whose stage equations
-are solved by diffrax's chord method with the Jacobian taken in forward mode
-(:class:`pacjax._chord.DenseChord`). The vector field is jitted on its own, so that its trace and
-its derivatives' are made once. Gradients of a trajectory with respect to any scene or damping
-parameter, the initial state or the controls go through diffrax's checkpointed adjoint.
+frozen-inertia Jacobian (``EquationsOfMotion.frozen_inertia_jacobian``): the potential's
+Hessian and the damping, without the inertia's derivatives, which are slow and the dearest part
+of an exact Jacobian. At tight ones it is ``diffrax.Kvaerno5`` (L-stable, 5th order), whose
+stage equations are solved by diffrax's chord method with the Jacobian taken in forward mode
+(:class:`pacjax._chord.DenseChord`). The vector field takes the model and controls as
+arguments, not by closure, so that its trace and its derivatives' are made once. Gradients of a
+trajectory with respect to any scene or damping parameter, the initial state or the controls go
+through diffrax's checkpointed adjoint.
 """
-
-import math
-from collections.abc import Callable
 
 import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import lineax as lx
 import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
 from .. import _deprecated
 from .._chord import kvaerno5
-from .._config import MATMUL_PRECISION
-from .._model.energy import strain_rate_energy
-from .._model.inertia import (
-    PHI_INERTIA_FACTOR,
-    body_dynamics,
-    coriolis_forces,
-    kinetic_energy,
-    mass_matrix,
-)
+from .._model.inertia import PHI_INERTIA_FACTOR
 from .._model.inputs import (
     as_traced_leaves,
     check_controls,
@@ -65,219 +34,15 @@ from .._model.inputs import (
     solver_dtype,
     static_load_sites,
 )
-from .._model.kinematics import jacobian_and_value
 from .._model.robot import concrete
 from .._model.scene import Scene
 from .._results import RESULTS
 from .._statics.problem import ScaledProblem
-from .damping import DEFAULT_DAMPING_RATIO, Damping, generalised_eigenvalues
+from .damping import Damping
+from .equations import EquationsOfMotion, vector_field, vector_field_jacobian
 from .rosenbrock import Rosenbrock23
 
-__all__ = [
-    "Damping",
-    "Trajectory",
-    "simulate",
-    "Rosenbrock23",
-    "rosenbrock23",
-    "mass_matrix",
-    "kinetic_energy",
-    "coriolis_forces",
-    "total_energy",
-    "accelerations",
-    "natural_frequencies",
-    "DEFAULT_DAMPING_RATIO",
-]
-
-
-# ------------------------------------------------------------------------------ forces
-class _Model(eqx.Module):
-    """What the vector field needs, built once per simulation."""
-
-    scene: Scene
-    passive: Scene  # the scene without its tendons: their force is the motor law
-    damping: Damping
-    tendon_damping: Array | None
-    phi_inertia: float = eqx.field(static=True)
-
-    @staticmethod
-    def build(scene: Scene, damping: Damping, phi_inertia: float, dtype) -> "_Model":
-        passive = Scene(
-            scene.robot,
-            scene.models,
-            loads=scene.loads,
-            quadrature_points=scene.quadrature_points,
-            rotation_substeps=scene.rotation_substeps,
-        )
-        kd = damping.tendon_gains(scene, dtype) if scene.tendons else None
-        return _Model(scene, passive, damping, kd, phi_inertia)
-
-    def material_damping(self, q, qdot):
-        """``K(q) qdot``: the gradient in ``qdot`` of the strain-rate energy."""
-        scene = self.scene
-
-        def rate_energy(v):
-            return strain_rate_energy(
-                scene.model,
-                scene.robot,
-                scene.coordinates(q),
-                scene.coordinates(v),
-                scene.quadrature_points,
-            )
-
-        return jax.grad(rate_energy)(qdot)
-
-    def _motor_law(self, lengths, rates, u, udot):
-        """Tendon tensions (N) under the motor PD law, and their derivative in the tendon
-        rates (the derivative gain while the tendon is taut, zero when slack or in tension
-        mode)."""
-        rest = self.scene.rest_tendon_lengths(lengths.dtype)
-        tension, gains = [], []
-        for i, t in enumerate(self.scene.tendons):
-            if t.mode == "length":
-                stretch = lengths[i] - (rest[i] - u[i])
-                stretch_rate = rates[i] + udot[i]
-                pull = (
-                    t.gain.astype(lengths.dtype) * stretch + self.tendon_damping[i] * stretch_rate
-                )
-                tension.append(jnp.maximum(pull, 0.0))
-                gains.append(jnp.where(pull > 0, self.tendon_damping[i], 0.0))
-            else:
-                tension.append(u[i])
-                gains.append(jnp.zeros((), lengths.dtype))
-        return jnp.stack(tension), jnp.stack(gains)
-
-    def tendon_forces(self, q, qdot, u, udot):
-        """``A(q) f_act``: generalised forces of the tendons under the motor PD law."""
-        lengths, lin = jax.linearize(self.scene.tendon_lengths, q)
-        tension, _ = self._motor_law(lengths, lin(qdot), u, udot)
-        (force,) = jax.linear_transpose(lin, q)(-tension)
-        return force
-
-    def forces(self, q, qdot, u, udot, mass):
-        """Every generalised force but inertia's: ``-G - K - D qdot + A f_act + Q_ext``, the
-        mass-proportional damping on ``mass`` (``M(q)``, passed in to be computed once)."""
-        force = -jax.grad(self.passive.potential_energy)(q, u)
-        extra = self.passive.nonconservative_forces(q)
-        if extra is not None:
-            force = force + extra
-        if self.scene.tendons:
-            force = force + self.tendon_forces(q, qdot, u, udot)
-        force = force - self.damping.stiffness * self.material_damping(q, qdot)
-        return force - self.damping.mass * jnp.matmul(mass, qdot, precision=MATMUL_PRECISION)
-
-    def accelerations(self, q, qdot, u, udot):
-        """``qddot`` from ``M qddot = -C qdot - G - K - D qdot + A f_act + Q_ext``."""
-        mass, bias = body_dynamics(self.scene, q, qdot, self.phi_inertia)
-        operator = lx.MatrixLinearOperator(mass, lx.positive_semidefinite_tag)
-        # throw=False: a wild Newton iterate of the implicit solver gives NaN here, and diffrax
-        # must see it to reject the step (a raise would abort the whole simulation).
-        force = self.forces(q, qdot, u, udot, mass) - bias
-        return lx.linear_solve(operator, force, lx.Cholesky(), throw=False).value
-
-    def frozen_inertia_jacobian(self, q, qdot, u, udot) -> Float[Array, "2n 2n"]:
-        """``d(qdot, qddot) / d(q, qdot)`` with the inertia frozen, for a W-method
-        (:class:`pacjax._dynamics.rosenbrock.Rosenbrock23`, whose order does not depend on it).
-
-        ``qddot``'s rows are ``M(q)^-1 (dF/dq, dF/dqdot)`` with ``M`` held fixed, the Coriolis
-        forces left out, ``dF/dq`` the Hessian of the potential energy with the tendons as the
-        springs of their motors' proportional gains (the statics' energy), and ``dF/dqdot`` the
-        damping: material, mass-proportional, and the motors' derivative gains on taut tendons.
-        That is the stiff part of the dynamics; what is left out (the inertia's derivatives,
-        and the damping forces' derivatives in ``q``) is as slow as the motion, and is the
-        kinematics differentiated twice or three times.
-        """
-        n = q.shape[0]
-        scene = self.scene
-        mass = mass_matrix(scene, q, self.phi_inertia)
-        d_q = -jax.hessian(scene.potential_energy)(q, u)
-        if not self.passive.is_conservative:
-            d_q = d_q + jax.jacfwd(self.passive.nonconservative_forces)(q)
-        d_qdot = -self.damping.stiffness * jax.jacfwd(self.material_damping, argnums=1)(q, qdot)
-        d_qdot = d_qdot - self.damping.mass * mass
-        if scene.tendons:
-            jac, lengths = jacobian_and_value(scene.tendon_lengths, q)
-            _, gains = self._motor_law(lengths, jac @ qdot, u, udot)
-            d_qdot = d_qdot - jnp.matmul(jac.T * gains, jac, precision=MATMUL_PRECISION)
-        factor = jax.scipy.linalg.cho_factor(mass)
-        lower = jax.scipy.linalg.cho_solve(factor, jnp.concatenate([d_q, d_qdot], axis=1))
-        upper = jnp.concatenate([jnp.zeros((n, n), q.dtype), jnp.eye(n, dtype=q.dtype)], axis=1)
-        return jnp.concatenate([upper, lower], axis=0)
-
-
-def _control_fn(controls, n_tendons: int, dtype) -> Callable:
-    """``t -> (u, du/dt)`` for constant or callable controls."""
-    if controls is None:
-        zero = jnp.zeros(n_tendons, dtype)
-        return lambda t: (zero, zero)
-    if callable(controls):
-
-        def fn(t):
-            u, udot = jax.jvp(lambda x: jnp.asarray(controls(x), dtype), (t,), (jnp.ones_like(t),))
-            return u, udot
-
-        return fn
-    return lambda t: (controls, jnp.zeros_like(controls))
-
-
-# ------------------------------------------------------------------------------ public helpers
-def accelerations(
-    scene: Scene,
-    q,
-    qdot,
-    controls=None,
-    controls_rate=None,
-    damping: Damping | None = None,
-    phi_inertia: float = PHI_INERTIA_FACTOR,
-) -> Float[Array, " n_dofs"]:
-    """``qddot`` of the full model at ``(q, qdot)`` under ``controls`` changing at
-    ``controls_rate`` (per second). ``damping`` None: no damping."""
-    q = jnp.asarray(q)
-    dtype = q.dtype
-    u = scene.default_controls(dtype) if controls is None else jnp.asarray(controls, dtype)
-    udot = jnp.zeros_like(u) if controls_rate is None else jnp.asarray(controls_rate, dtype)
-    model = _Model.build(scene, Damping() if damping is None else damping, phi_inertia, dtype)
-    return model.accelerations(q, jnp.asarray(qdot, dtype), u, udot)
-
-
-def total_energy(
-    scene: Scene, q, qdot, controls=None, phi_inertia: float = PHI_INERTIA_FACTOR
-) -> Float[Array, ""]:
-    """Kinetic plus potential energy (J), tendons included with their static (spring) energy.
-
-    Conserved by undamped motions under constant controls (with ``kappa_D = 0``) when every
-    load is conservative.
-    """
-    q = jnp.asarray(q)
-    u = scene.default_controls(q.dtype) if controls is None else jnp.asarray(controls, q.dtype)
-    return kinetic_energy(scene, q, jnp.asarray(qdot, q.dtype), phi_inertia) + (
-        scene.potential_energy(q, u)
-    )
-
-
-def natural_frequencies(
-    scene: Scene, q=None, controls=None, phi_inertia: float = PHI_INERTIA_FACTOR
-) -> Float[Array, " n_dofs"]:
-    """Undamped natural frequencies (Hz, ascending) of small motions about ``q``.
-
-    Eigenvalues of ``M^-1 K``, ``K`` the Hessian of the potential energy (tendons as springs)
-    at ``q`` (an equilibrium, e.g. ``solve_equilibrium(...).q``; default straight). A negative
-    eigenvalue (an unstable equilibrium) gives a NaN frequency. Conservative scenes only.
-    """
-    if not scene.is_conservative:
-        raise ValueError(
-            "natural_frequencies needs a conservative scene (no follower force or moment)"
-        )
-    dtype = solver_dtype(scene)
-    q = check_q(scene, q, dtype)
-    u = check_controls(scene, controls, dtype)
-    return _frequencies(as_traced_leaves(scene, dtype), q, u, phi_inertia)
-
-
-@eqx.filter_jit
-def _frequencies(scene, q, u, phi_inertia):
-    stiffness = jax.hessian(scene.potential_energy)(q, u)
-    eig = generalised_eigenvalues(stiffness, mass_matrix(scene, q, phi_inertia))
-    return jnp.sqrt(jnp.where(eig >= 0, eig, jnp.nan)) / (2 * math.pi)
+__all__ = ["Trajectory", "simulate", "rosenbrock23", "ROSENBROCK_RTOL", "default_solver"]
 
 
 # ------------------------------------------------------------------------------ simulate
@@ -547,28 +312,11 @@ def _result(result: diffrax.RESULTS) -> RESULTS:
     return RESULTS.where(result == diffrax.RESULTS.successful, RESULTS.successful, failed)
 
 
-def _vector_field(t, y, args):
-    """``(qdot, qddot)``. A jitted function of its arguments (the model and controls come in
-    ``args``, not by closure): its trace, and the traces of its derivatives, are made once and
-    reused everywhere the solver calls or differentiates it."""
-    model, controls = args
-    q, qdot = y
-    u, udot = _control_fn(controls, model.scene.n_tendons, q.dtype)(t)
-    return qdot, model.accelerations(q, qdot, u, udot)
-
-
-def _vector_field_jacobian(t, y, args):
-    """:meth:`_Model.frozen_inertia_jacobian` along the flattened state ``(q, qdot)``."""
-    model, controls = args
-    q, qdot = y
-    u, udot = _control_fn(controls, model.scene.n_tendons, q.dtype)(t)
-    return model.frozen_inertia_jacobian(q, qdot, u, udot)
-
-
 def rosenbrock23() -> Rosenbrock23:
     """:class:`Rosenbrock23` with the dynamics' frozen-inertia Jacobian
-    (:meth:`_Model.frozen_inertia_jacobian`): :func:`simulate`'s solver at moderate tolerances."""
-    return Rosenbrock23(jacobian=_vector_field_jacobian)
+    (:meth:`EquationsOfMotion.frozen_inertia_jacobian`): :func:`simulate`'s solver at moderate
+    tolerances."""
+    return Rosenbrock23(jacobian=vector_field_jacobian)
 
 
 #: ``rtol`` from which :func:`simulate` takes :func:`rosenbrock23` by default (Kvaerno5 below).
@@ -586,9 +334,9 @@ def default_solver(rtol: float) -> diffrax.AbstractSolver:
 def integrate(scene, damping, controls, q0, qdot0, span, ts, dt0, opts: _Options):
     """The compiled simulation of checked inputs (:func:`prepare`, :func:`aligned_rest_start`):
     one row of :func:`pacjax._dynamics.batch.simulate_batch`."""
-    model = _Model.build(scene, damping, opts.phi_inertia, q0.dtype)
+    model = EquationsOfMotion.build(scene, damping, opts.phi_inertia, q0.dtype)
     sol = diffrax.diffeqsolve(
-        diffrax.ODETerm(_vector_field),
+        diffrax.ODETerm(vector_field),
         opts.solver,
         t0=span[0],
         t1=span[1],

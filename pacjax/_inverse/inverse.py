@@ -38,27 +38,21 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from collections.abc import Mapping
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import jax.tree_util as jtu
 import numpy as np
 
-from .. import _deprecated
 from .._jit import jit
 from .._model.inputs import check_scene, static_load_sites
 from .._model.scene import Scene
 from .._statics.batch import solve_batch
 from .._statics.equilibrium import solve_equilibrium
-from .._statics.options import SolverOptions, resolve_options
 from .problem import (
-    CommandLimits,
     Solve,
     checked_array,
     checked_finite,
-    make_limits,
     make_target,
     solve_many,
     solve_one,
@@ -67,100 +61,20 @@ from .problem import (
     tensions_at,
 )
 from .results import InverseResult, Tracking, Workspace, inverse_result
-
-
-class _Settings(eqx.Module):
-    """Everything of a call but the target, checked once."""
-
-    limits: CommandLimits
-    reached_tol: float = eqx.field(static=True)
-    orientation_tol: float = eqx.field(static=True)
-    n_starts: int = eqx.field(static=True)
-    max_steps: int = eqx.field(static=True)
-    rtol: float = eqx.field(static=True)
-    atol: float = eqx.field(static=True)
-    seed: int = eqx.field(static=True)
-    options: SolverOptions = eqx.field(static=True)
-
-
-def _settings(scene, kw) -> _Settings:
-    reached_tol = float(kw.pop("reached_tol"))
-    if not (np.isfinite(reached_tol) and reached_tol > 0):
-        raise ValueError(f"reached_tol must be > 0 (m), got {reached_tol}")
-    orientation_tol = float(kw.pop("orientation_tol"))
-    if not (np.isfinite(orientation_tol) and orientation_tol > 0):
-        raise ValueError(f"orientation_tol must be > 0 (rad), got {orientation_tol}")
-    n_starts, max_steps = int(kw.pop("n_starts")), int(kw.pop("max_steps"))
-    if n_starts < 1:
-        raise ValueError(f"n_starts must be >= 1, got {n_starts}")
-    if max_steps < 1:
-        raise ValueError(f"max_steps must be >= 1, got {max_steps}")
-    options, legacy = kw.pop("options"), kw.pop("solver_options")
-    if legacy is not None:
-        _deprecated.warn("solver_options=", "options=pacjax.SolverOptions(...)")
-        if not isinstance(legacy, Mapping):
-            raise TypeError("solver_options must be a dict of pacjax.SolverOptions fields")
-    options = resolve_options(options, **(legacy or {}))
-    limits = make_limits(
-        scene,
-        kw.pop("lower"),
-        kw.pop("upper"),
-        kw.pop("max_tension"),
-        kw.pop("max_contraction"),
-        kw.pop("tension_weight"),
-        kw.pop("tension_limit_weight"),
-        kw.pop("contraction_weight"),
-    )
-    return _Settings(
-        limits=limits,
-        reached_tol=reached_tol,
-        orientation_tol=orientation_tol,
-        n_starts=n_starts,
-        max_steps=max_steps,
-        rtol=float(kw.pop("rtol")),
-        atol=float(kw.pop("atol")),
-        seed=int(kw.pop("seed")),
-        options=options,
-    )
-
-
-_DEFAULTS = dict(
-    lower=None,
-    upper=None,
-    max_tension=None,
-    max_contraction=0.5,
-    tension_weight=1e-5,
-    tension_limit_weight=1e-2,
-    contraction_weight=10.0,
-    reached_tol=1e-4,
-    orientation_tol=1e-2,
-    n_starts=4,
-    max_steps=60,
-    rtol=1e-4,
-    atol=1e-12,
-    seed=0,
-    options=None,
-    solver_options=None,
+from .settings import (
+    check_settings,
+    is_reached,
+    random_starts,
+    tolerances,
+    with_defaults,
+    without_tension_weight,
 )
-
 
 #: A solution whose error is above this fraction of ``reached_tol`` is polished: solved again
 #: from where it stopped without the low-tension term, which otherwise biases it (by
 #: ``~tension_weight^2``). Gauss-Newton steps are minimum-norm, so the polish barely moves
 #: along the commands that do not change the pose and keeps the low tension found.
 _POLISH = 0.1
-
-
-def _without_tension_weight(limits: CommandLimits) -> CommandLimits:
-    return eqx.tree_at(lambda x: x.tension_weight, limits, jnp.zeros_like(limits.tension_weight))
-
-
-def _random_starts(settings: _Settings, n: int, key_offset: int = 0) -> np.ndarray:
-    lo, hi = np.asarray(settings.limits.lower), np.asarray(settings.limits.upper)
-    rng = np.random.default_rng([settings.seed, key_offset])
-    # Away from the bounds, where the sigmoid is not flat and tendons are neither slack nor
-    # fully pulled.
-    return lo + (hi - lo) * rng.uniform(0.05, 0.6, (n, lo.size))
 
 
 def _check_start(scene, name, value, shape):
@@ -170,14 +84,10 @@ def _check_start(scene, name, value, shape):
     return arr
 
 
-def _is_reached(settings, error, angle, ok):
-    return (error <= settings.reached_tol) & (angle <= settings.orientation_tol) & ok
-
-
 def _result(scene, settings, best: Solve, starts) -> InverseResult:
     """The :class:`InverseResult` of the best solve; ``best.iterations`` counts all starts."""
     error, angle, ok = (np.asarray(x) for x in (best.error, best.orientation_error, best.converged))
-    reached = _is_reached(settings, error, angle, ok)
+    reached = is_reached(settings, error, angle, ok)
     u, q = best.controls, best.q
     tensions = (
         tensions_at(scene, q, u)
@@ -203,12 +113,6 @@ def _result(scene, settings, best: Solve, starts) -> InverseResult:
 def _cost(settings, error, angle, weight):
     """Ranks candidate solutions: position error plus weighted orientation error (m)."""
     return np.asarray(error) + np.asarray(weight) * np.asarray(angle)
-
-
-def _tolerances(settings):
-    """``(rtol, atol, max_steps)`` of :func:`solve_one` / :func:`solve_many`: the tolerances
-    traced (one compiled solver for all of them), the step budget static."""
-    return jnp.asarray(settings.rtol), jnp.asarray(settings.atol), settings.max_steps
 
 
 def _reference_point(tgt, axis):
@@ -266,7 +170,7 @@ def inverse_statics(
     """
     check_scene(scene)
     scene = static_load_sites(scene)
-    settings = _settings(scene, _kwargs(kwargs))
+    settings = check_settings(scene, with_defaults(kwargs))
     tgt = make_target(scene, target, rotation, orientation_weight, sites)
     starts = _single_starts(scene, settings, tgt, controls0, q0, workspace)
     weight = tgt.orientation_weight
@@ -297,13 +201,13 @@ def _single_starts(scene, settings, tgt, controls0, q0, workspace):
     if workspace is not None:
         for i in workspace.nearest(_reference_point(tgt, 0), settings.n_starts):
             starts.append((np.asarray(workspace.controls[i]), np.asarray(workspace.q[i])))
-    starts += [(u, None) for u in _random_starts(settings, settings.n_starts)]
+    starts += [(u, None) for u in random_starts(settings, settings.n_starts)]
     return starts[: settings.n_starts]
 
 
 def _reached_one(settings, out: Solve) -> bool:
     angle, ok = float(out.orientation_error), bool(out.converged)
-    return _is_reached(settings, float(out.error), angle, ok)
+    return is_reached(settings, float(out.error), angle, ok)
 
 
 def _solve_from_start(scene, tgt, settings, u, q):
@@ -331,23 +235,16 @@ def _solve_from_start(scene, tgt, settings, u, q):
 def _solve_polished(scene, tgt, settings, u, q):
     """Levenberg-Marquardt from ``(u, q)``, then the polish without the tension preference
     where that preference biased a converged solve; ``(the better solve, iterations)``."""
-    tol = _tolerances(settings)
+    tol = tolerances(settings)
     out = solve_one(scene, tgt, settings.limits, u, q, *tol, settings.options)
     steps = int(out.iterations)
     if bool(out.converged) and float(out.error) > _POLISH * settings.reached_tol:
-        free = _without_tension_weight(settings.limits)
+        free = without_tension_weight(settings.limits)
         polished = solve_one(scene, tgt, free, out.controls, out.q, *tol, settings.options)
         steps += int(polished.iterations)
         if bool(polished.converged) and float(polished.error) < float(out.error):
             out = polished
     return out, steps
-
-
-def _kwargs(kwargs):
-    unknown = set(kwargs) - set(_DEFAULTS)
-    if unknown:
-        raise TypeError(f"unknown option(s): {', '.join(sorted(unknown))}")
-    return {**_DEFAULTS, **kwargs}
 
 
 def _pad_rows(x, size):
@@ -377,7 +274,7 @@ def inverse_statics_batch(
     """
     check_scene(scene)
     scene = static_load_sites(scene)
-    settings = _settings(scene, _kwargs(kwargs))
+    settings = check_settings(scene, with_defaults(kwargs))
     tgt = make_target(scene, targets, rotation, orientation_weight, sites, batched=True)
     n = tgt.points.shape[0]
     if chunk_size < 1:
@@ -392,7 +289,7 @@ def inverse_statics_batch(
         out = _solve_round(scene, tgt, settings, todo, u, q, chunk)
         best = _keep_best(settings, tgt, best, cost, todo, out)
         starts_used[todo] += 1
-        reached = _is_reached(settings, best.error, best.orientation_error, best.converged)
+        reached = is_reached(settings, best.error, best.orientation_error, best.converged)
         todo = np.flatnonzero(~reached)
         if todo.size == 0:
             break
@@ -429,7 +326,7 @@ class _BatchStarts:
             ws = self.workspace
             return np.asarray(ws.controls, float)[idx], np.asarray(ws.q, float)[idx]
         else:
-            u = _random_starts(self.settings, self.n, key_offset=k)[rows]
+            u = random_starts(self.settings, self.n, key_offset=k)[rows]
         options = self.settings.options
         eq = solve_batch(self.scene, u, chunk_size=self.chunk, progress=False, options=options)
         return u, np.asarray(eq.q, float)
@@ -499,12 +396,12 @@ def _solve_chunk(scene, sub, settings, u, q, size, chunk) -> Solve:
     """One padded chunk (targets ``sub``, starts ``u``, ``q``): Levenberg-Marquardt, then the
     polish without the tension preference where it biased a converged solve; the first
     ``size`` rows."""
-    tol = _tolerances(settings)
+    tol = tolerances(settings)
     u, q = jnp.asarray(u), jnp.asarray(q)
     out = _head(solve_many(scene, sub, settings.limits, u, q, *tol, settings.options), size)
     polish = out.converged & (out.error > _POLISH * settings.reached_tol)
     if np.any(polish):
-        free = _without_tension_weight(settings.limits)
+        free = without_tension_weight(settings.limits)
         u, q = jnp.asarray(_pad_rows(out.controls, chunk)), jnp.asarray(_pad_rows(out.q, chunk))
         again = _head(solve_many(scene, sub, free, u, q, *tol, settings.options), size)
         _put(out, again, polish & again.converged & (again.error < out.error))
@@ -516,7 +413,7 @@ def _solve_chunk(scene, sub, settings, u, q, size, chunk) -> Solve:
 def _retry_taut(scene, tgt, settings, rows, out: Solve, chunk) -> None:
     """Rows of ``out`` that stopped short with slack tendons: again from those tendons pulled
     taut; a retry that ranks better replaces the row (in place), its iterations add up."""
-    reached = _is_reached(settings, out.error, out.orientation_error, out.converged)
+    reached = is_reached(settings, out.error, out.orientation_error, out.converged)
     miss = np.flatnonzero(out.converged & ~reached)
     if miss.size == 0:
         return
@@ -557,8 +454,8 @@ def track(
     Levenberg-Marquardt steps, so the commands vary smoothly (:attr:`Tracking.max_command_jump`).
     """
     check_scene(scene)
-    kw = _kwargs(kwargs)
-    _settings(scene, dict(kw))  # check the options before the first solve
+    kw = with_defaults(kwargs)
+    check_settings(scene, dict(kw))  # check the options before the first solve
     tgt = make_target(scene, waypoints, rotation, orientation_weight, sites, batched=True)
     start = time.perf_counter()
     results = []
@@ -602,7 +499,7 @@ def sample_workspace(
     check_scene(scene)
     if int(n) < 1:
         raise ValueError(f"n must be >= 1, got {n}")
-    settings = _settings(scene, _kwargs({**kwargs, "seed": seed}))
+    settings = check_settings(scene, with_defaults({**kwargs, "seed": seed}))
     lo, hi = np.asarray(settings.limits.lower), np.asarray(settings.limits.upper)
     rng = np.random.default_rng(seed)
     u = lo + (hi - lo) * rng.uniform(0.0, 1.0, (int(n), lo.size))
