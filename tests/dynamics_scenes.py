@@ -8,9 +8,10 @@ import pacjax as pj
 HANGING = np.diag([1.0, -1.0, -1.0])
 
 
-def small_scene(density=0.3):
+def small_scene(density=0.3, order=1, quadrature_points=4):
     """One segment, linear polynomial curvature, 4 Gauss points, gravity, an end mass and two
-    length-mode tendons: the structure the default dynamics tests share (one compilation)."""
+    length-mode tendons: the structure the default dynamics tests share (one compilation).
+    ``order=0, quadrature_points=2``: the smallest scene with all of these forces."""
     segment = pj.Segment(0.15, 0.02, 600.0, linear_density=density, radius=0.012)
     guides = (0.0, 0.5, 1.0)
     tendons = (
@@ -20,10 +21,10 @@ def small_scene(density=0.3):
     loads = (pj.Gravity(), pj.PointMass(0.03, 0, 1.0))
     return pj.Scene(
         pj.Robot([segment], base_rotation=HANGING),
-        pj.PolynomialCurvature(order=1),
+        pj.PolynomialCurvature(order=order),
         tendons=tendons,
         loads=loads,
-        quadrature_points=4,
+        quadrature_points=quadrature_points,
     )
 
 

@@ -1,5 +1,6 @@
 """The solver's start: a straight PCC/PAC segment gets the bending plane of the force on it."""
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -14,10 +15,15 @@ ANGLES = np.asarray(pj.presets.TENDON_ANGLES)
 
 def _aligned(scene, controls, q0=None, tol=1e-10):
     """The start the solver takes from ``q0`` (default straight), per segment."""
-    problem = ScaledProblem.build(scene, jnp.asarray(controls, float))
     q0 = scene.zeros() if q0 is None else jnp.asarray(q0, float)
-    y = problem.aligned(q0 / problem.sigma, tol)
-    return np.asarray(problem.q(y)).reshape(scene.n_segments, scene.dofs_per_segment)
+    q = _aligned_q(scene, jnp.asarray(controls, float), q0, float(tol))
+    return np.asarray(q).reshape(scene.n_segments, scene.dofs_per_segment)
+
+
+@eqx.filter_jit  # compiled once per scene structure (op by op it took seconds a call)
+def _aligned_q(scene, controls, q0, tol):
+    problem = ScaledProblem.build(scene, controls)
+    return problem.q(problem.aligned(q0 / problem.sigma, tol))
 
 
 def _pull(segment, tendon, amount=0.01):
