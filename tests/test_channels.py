@@ -3,6 +3,7 @@ straight limit of the ring model, the structured Hessian, solves, scene files an
 
 import warnings
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -45,19 +46,25 @@ def _arc_length(scene, q, tendon, n=2000):
     return (4.0 * _chord_sum(scene, q, tendon, 2 * n) - _chord_sum(scene, q, tendon, n)) / 3.0
 
 
+@eqx.filter_jit  # once per scene structure and points (op by op it took seconds a call)
+def _frames(scene, q, segment: int, s: tuple[float, ...]):
+    # Known points (static) are knots of the kinematics, as they were op by op.
+    return scene.frames(q, np.full(len(s), segment), np.asarray(s))
+
+
 def _chord_sum(scene, q, tendon, n):
     start = tendon.entry_segment
     total = 0.0
     for k in range(start, tendon.segment + 1):
         end = tendon.s if k == tendon.segment else 1.0
         s = np.linspace(0.0, end, n + 1)
-        frac = np.array([tendon.route_fraction(k, v) for v in s])
+        frac = np.asarray(tendon.route_fraction(k, s))
         off_end = tendon.offset if tendon.offset_end is None else tendon.offset_end
         ang_end = tendon.angle if tendon.angle_end is None else tendon.angle_end
         rho = float(tendon.offset) + (float(off_end) - float(tendon.offset)) * frac
         alpha = float(tendon.angle) + (float(ang_end) - float(tendon.angle)) * frac
         local = np.stack([rho * np.cos(alpha), rho * np.sin(alpha), 0 * rho], -1)
-        rot, pos = scene.frames(q, np.full(n + 1, k), s)
+        rot, pos = _frames(scene, q, k, tuple(s.tolist()))
         points = np.asarray(pos) + np.einsum("pij,pj->pi", np.asarray(rot), local)
         total += np.sum(np.linalg.norm(np.diff(points, axis=0), axis=-1))
     return total
