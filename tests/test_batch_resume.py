@@ -19,8 +19,17 @@ SCENE = Path(__file__).resolve().parent.parent / "experiments" / "scenes" / "ten
 ROWS, CHUNK = 6000, 64
 
 
+#: The command line with Python's own SIGINT handler: a process started in the background by a
+#: non-interactive shell (as a CI runner may start the tests) inherits SIGINT ignored, and Python
+#: then leaves it ignored.
+_CLI = (
+    "import signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
+    "from pacjax.cli.main import main; main()"
+)
+
+
 def _batch(out: Path, *args) -> subprocess.Popen:
-    command = [sys.executable, "-m", "pacjax.cli.main", "batch", *map(str, args), "--no-plot"]
+    command = [sys.executable, "-c", _CLI, "batch", *map(str, args), "--no-plot"]
     return subprocess.Popen(
         command, cwd=out, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True
     )

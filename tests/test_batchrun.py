@@ -3,11 +3,10 @@ input rejected before anything is compiled."""
 
 import json
 
-import equinox as eqx
 import h5py
-import jax.numpy as jnp
 import numpy as np
 import pytest
+from checks import scaled_residual
 from click.testing import CliRunner
 
 import pacjax as pj
@@ -173,11 +172,6 @@ def test_cli_rejects_bad_input_in_one_line(scene_file, tmp_path):
 
 
 # ------------------------------------------------------------------------------ solving
-@eqx.filter_jit
-def _scaled_residual(scene, q, controls):
-    """``max |F_i| / (D_ii sigma_i)``, as :class:`pacjax.Equilibrium` defines it."""
-    scale = scene.elastic_stiffness_diagonal() * scene.coordinate_scale()
-    return jnp.max(jnp.abs(scene.residual(q, controls) / scale))
 
 
 @pytest.fixture(scope="module")
@@ -244,7 +238,7 @@ def test_batch_writes_every_column(batch_run, scene):
         # (its own Gauss-Legendre rule over [0, s]); the two agree to ~1e-9 relative in
         # position, which is ~3e-8 in this scaled residual.
         solver_scene = static_load_sites(scene)
-        value = float(_scaled_residual(solver_scene, data["q"][i], data["commands"][i]))
+        value = float(scaled_residual(solver_scene, data["q"][i], data["commands"][i]))
         assert value <= attrs["tol"]
         tip, _ = pj.tip_pose(scene, data["q"][i])
         np.testing.assert_allclose(tip, data["tip_position"][i], atol=1e-12)
