@@ -149,6 +149,7 @@ def test_frozen_inertia_jacobian_is_exact_where_the_inertia_is_still():
     )
 
 
+@pytest.mark.long(minutes=1.2)
 @pytest.mark.slow
 def test_simulate_with_rosenbrock_matches_a_tight_reference():
     """A step of the tendon commands from rest, 0.1 s: Rosenbrock23 at rtol 1e-6 against an

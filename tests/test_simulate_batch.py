@@ -10,6 +10,7 @@ import pacjax as pj
 COMMANDS = np.array([[0.008, 0.002], [0.0, 0.006], [0.004, 0.0]])
 
 
+@pytest.mark.long(minutes=1.2)
 @pytest.mark.slow  # two programs of the dynamics to compile (1 min on 2 cores)
 def test_rows_equal_their_own_simulations():
     kwargs = dict(saveat=[0.01, 0.02], solver=pj.dynamics.rosenbrock23(), rtol=1e-6, atol=1e-8)
