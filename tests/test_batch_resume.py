@@ -23,7 +23,7 @@ ROWS, CHUNK = 6000, 64
 #: non-interactive shell (as a CI runner may start the tests) inherits SIGINT ignored, and Python
 #: then leaves it ignored.
 _CLI = (
-    "import signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
+    "import signal; signal.signal(signal.SIGINT, signal.default_int_handler); "
     "from pacjax.cli.main import main; main()"
 )
 

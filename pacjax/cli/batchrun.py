@@ -30,10 +30,13 @@ so far; a run that was interrupted leaves a readable prefix).
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import math
 import resource
+import signal
 import sys
+import threading
 import time
 from collections.abc import Callable
 
@@ -364,6 +367,36 @@ def peak_device_memory_mib() -> float | None:
     return max(peaks) if peaks else None
 
 
+@contextlib.contextmanager
+def _interrupts():
+    """``check()``: raise ``KeyboardInterrupt`` after a chunk if Ctrl-C came during it.
+
+    Python raises Ctrl-C's ``KeyboardInterrupt`` wherever the main thread is; inside a weakref
+    callback or a finaliser (the solver and h5py run many) it is printed and dropped, and a
+    batch went on to its end. The handler also records the signal, so the next chunk boundary
+    stops the run. A SIGINT that is ignored or handled by the caller is left as it is.
+    """
+    seen = []
+
+    def handler(signum, frame):
+        seen.append(signum)
+        raise KeyboardInterrupt
+
+    def check():
+        if seen:
+            raise KeyboardInterrupt
+
+    main = threading.current_thread() is threading.main_thread()
+    if not main or signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
+        yield lambda: None
+        return
+    signal.signal(signal.SIGINT, handler)
+    try:
+        yield check
+    finally:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+
+
 def run_batch(
     scene: pj.Scene,
     commands: np.ndarray,
@@ -400,7 +433,10 @@ def run_batch(
     tally = _Tally()
     first = None
     start = time.perf_counter()
-    with BatchWriter(path, scene, n, attrs, chunk_rows=chunk, resume=resume) as writer:
+    with (
+        BatchWriter(path, scene, n, attrs, chunk_rows=chunk, resume=resume) as writer,
+        _interrupts() as check_interrupt,
+    ):
         done = writer.rows_written
         if resume:
             _check_resumable(writer.file, commands, chunk)
@@ -424,6 +460,7 @@ def run_batch(
                 first = time.perf_counter() - start
             if on_chunk is not None:
                 on_chunk(rows.stop - rows.start)
+            check_interrupt()
     wall = time.perf_counter() - start
     return BatchSummary(
         n=n,
