@@ -83,16 +83,19 @@ def test_length_is_the_arc_length_of_the_tendon_curve(model):
     np.testing.assert_allclose(scene.tendon_lengths(q), dense.tendon_lengths(q), rtol=1e-12)
 
 
+@eqx.filter_jit  # once per scene structure (op by op: ~80 small compilations a scene)
+def _lengths_and_jacobian(scene, q):
+    return scene.tendon_lengths(q), jax.jacfwd(scene.tendon_lengths)(q)
+
+
 def test_float32_lengths_and_derivatives_follow_float64():
     scene = pj.Scene(_robot(), pj.PAC(), _tendons())
     single = pj.astype(scene, jnp.float32)
     for q in (scene.zeros(), _bent(scene)):
         q32 = q.astype(jnp.float32)
-        np.testing.assert_allclose(
-            single.tendon_lengths(q32), scene.tendon_lengths(q32.astype(float)), rtol=2e-6
-        )
-        jac32 = jax.jacfwd(single.tendon_lengths)(q32)
-        jac64 = jax.jacfwd(scene.tendon_lengths)(q32.astype(float))
+        lengths32, jac32 = _lengths_and_jacobian(single, q32)
+        lengths64, jac64 = _lengths_and_jacobian(scene, q32.astype(float))
+        np.testing.assert_allclose(lengths32, lengths64, rtol=2e-6)
         np.testing.assert_allclose(jac32, jac64, atol=2e-6 * float(jnp.max(jnp.abs(jac64))))
 
 
@@ -118,15 +121,17 @@ def test_straight_channel_is_the_ring_model_at_rest_and_its_limit_in_a_bend():
         tendon = pj.Tendon(0, 0.7, 0.012, offset_end=0.006, routing=routing, gain=1e3, **guides)
         return pj.Scene(robot, pj.PAC(), (tendon,))
 
-    channel = scene("channel")
+    # Compiled once per scene (op by op: ~60 small compilations a scene).
+    lengths = eqx.filter_jit(
+        lambda scene, q: (scene.rest_tendon_lengths(), scene.tendon_lengths(q))
+    )
     q = jnp.asarray([4.0, -2.0, 0.3, 0.002])
+    channel_rest, channel_bent = lengths(scene("channel"), q)
     gaps = []
     for n in (11, 41, 161):
-        rings = scene("rings", n)
-        np.testing.assert_allclose(
-            rings.rest_tendon_lengths(), channel.rest_tendon_lengths(), rtol=1e-14
-        )
-        gaps.append(float(channel.tendon_lengths(q)[0] - rings.tendon_lengths(q)[0]))
+        rings_rest, rings_bent = lengths(scene("rings", n), q)
+        np.testing.assert_allclose(rings_rest, channel_rest, rtol=1e-14)
+        gaps.append(float(channel_bent[0] - rings_bent[0]))
     assert gaps[0] > 0
     np.testing.assert_allclose(np.array(gaps[:-1]) / np.array(gaps[1:]), 16.0, rtol=0.05)
 
@@ -144,16 +149,16 @@ def test_structured_hessian_with_channels_and_rings(model, dtype):
     scene = pj.astype(pj.Scene(_robot(), model, tendons, loads), dtype)
     controls = jnp.asarray([2.0, 1.0, -0.003, 0.01], dtype)
     tol = 1e-10 if dtype == jnp.float64 else 2e-4
-    structured = jax.jit(lambda x: energy_derivatives(scene, x, controls)[1:])
-    reference = jax.jit(
+    # The structured derivatives and the autodiff ones in one program (one compilation).
+    derivatives = jax.jit(
         lambda x: (
+            energy_derivatives(scene, x, controls)[1:],
             jax.grad(scene.potential_energy)(x, controls),
             jax.hessian(scene.potential_energy)(x, controls),
         )
     )
     for q in (scene.zeros(dtype), _bent(scene).astype(dtype)):
-        grad, hess = structured(q)
-        ref_grad, ref_hess = reference(q)
+        (grad, hess), ref_grad, ref_hess = derivatives(q)
         scale = float(jnp.max(jnp.abs(ref_hess)))
         np.testing.assert_allclose(grad, ref_grad, atol=tol * float(jnp.max(jnp.abs(ref_grad))))
         np.testing.assert_allclose(hess, ref_hess, atol=tol * scale)
