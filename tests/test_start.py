@@ -26,6 +26,14 @@ def _aligned_q(scene, controls, q0, tol):
     return problem.q(problem.aligned(q0 / problem.sigma, tol))
 
 
+# Compiled once per scene structure (op by op: ~100 small compilations a scene). The step
+# (``moved``) stays op by op: compiled, its division by sigma and the test's product with sigma
+# can round differently from the product of the parts that the tests compare exactly.
+_build = eqx.filter_jit(ScaledProblem.build)
+# The markers of a batch of configurations, one program (a loop over rows ran op by op).
+_batch_markers = eqx.filter_jit(jax.vmap(pj.markers, in_axes=(None, 0)))
+
+
 def _pull(segment, tendon, amount=0.01):
     controls = np.zeros(9)
     controls[3 * segment + tendon] = amount
@@ -115,9 +123,7 @@ def test_aligned_start_reaches_the_same_equilibria_in_fewer_steps(model):
     plain = pj.solve_batch(scene, commands, np.tile(q0.reshape(-1), (24, 1)), fallback=False)
     for eq in (aligned, plain):
         assert np.all(eq.converged) and np.all(eq.stable)
-    tips = [
-        np.stack([np.asarray(pj.markers(scene, q))[-1] for q in eq.q]) for eq in (aligned, plain)
-    ]
+    tips = [np.asarray(_batch_markers(scene, eq.q))[:, -1] for eq in (aligned, plain)]
     # Both are minima of the same energy; they may differ by the regulariser on phi
     # (relative 1e-6), which prefers one of the two equivalent (c0, phi) of a bent segment.
     np.testing.assert_allclose(tips[0], tips[1], atol=1e-5)
@@ -157,7 +163,7 @@ def test_a_step_moves_the_bending_vector_along_a_line(model):
     # quarter turn (a bend through straight goes on with theta < 0); a segment whose end is
     # not turned, and dL, move as y + dy; the move is y + dy to first order.
     scene = pj.presets.stella2023(model, tip_mass=0.2)
-    problem = ScaledProblem.build(scene, jnp.asarray(_pull(1, 0), float))
+    problem = _build(scene, jnp.asarray(_pull(1, 0), float))
     n, d, k = scene.n_segments, scene.dofs_per_segment, model.free_plane_angle()
     beta = np.asarray(model.plane_angle_basis(jnp.ones(())))
     rng = np.random.default_rng(4)
@@ -205,7 +211,7 @@ def test_a_step_moves_the_bending_vector_along_a_line(model):
 def test_other_models_step_to_y_plus_dy():
     for model in (pj.PAC(frame="paper"), pj.PolynomialCurvature(1)):
         scene = pj.presets.stella2023(model, tip_mass=0.2)
-        problem = ScaledProblem.build(scene, jnp.asarray(_pull(1, 0), float))
+        problem = _build(scene, jnp.asarray(_pull(1, 0), float))
         y, dy = np.random.default_rng(1).normal(size=(2, scene.n_dofs))
         np.testing.assert_array_equal(problem.moved(jnp.asarray(y), jnp.asarray(dy)), y + dy)
 
@@ -221,9 +227,7 @@ def test_the_bending_vector_step_reaches_the_same_equilibria_in_fewer_steps(monk
     jax.clear_caches()
     for eq in (curved, straight):
         assert np.all(eq.converged) and np.all(eq.stable)
-    tips = [
-        np.stack([np.asarray(pj.markers(scene, q))[-1] for q in eq.q]) for eq in (curved, straight)
-    ]
+    tips = [np.asarray(_batch_markers(scene, eq.q))[:, -1] for eq in (curved, straight)]
     np.testing.assert_allclose(tips[0], tips[1], atol=1e-6)
     assert np.mean(curved.steps) < 0.9 * np.mean(straight.steps), (
         np.mean(curved.steps),
