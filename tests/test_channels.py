@@ -70,17 +70,20 @@ def _chord_sum(scene, q, tendon, n):
     return total
 
 
+_lengths = eqx.filter_jit(lambda scene, q: scene.tendon_lengths(q))  # once per structure
+
+
 @pytest.mark.parametrize("model", MODELS, ids=lambda m: type(m).__name__)
 def test_length_is_the_arc_length_of_the_tendon_curve(model):
     scene = pj.Scene(_robot(), model, _tendons())
     for q in (scene.zeros(), _bent(scene), _bent(scene, 5.0, seed=1)):
-        lengths = np.asarray(scene.tendon_lengths(q))
+        lengths = np.asarray(_lengths(scene, q))
         reference = [_arc_length(scene, q, t) for t in scene.tendons]
         np.testing.assert_allclose(lengths, reference, rtol=1e-11)
     # The rule converges: 8 points agree with 32 to round-off on a bent pose.
     dense = pj.Scene(_robot(), model, _tendons(), quadrature_points=32)
     q = _bent(scene, 5.0, seed=1)
-    np.testing.assert_allclose(scene.tendon_lengths(q), dense.tendon_lengths(q), rtol=1e-12)
+    np.testing.assert_allclose(_lengths(scene, q), _lengths(dense, q), rtol=1e-12)
 
 
 @eqx.filter_jit  # once per scene structure (op by op: ~80 small compilations a scene)
