@@ -3,9 +3,12 @@
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from dynamics_scenes import SCENE
+from dynamics_scenes import small_scene
 
 import pacjax as pj
+
+#: The smallest scene with every force of the dynamics (one compilation of each program).
+SCENE = small_scene(order=0, quadrature_points=2)
 
 COMMANDS = np.array([[0.008, 0.002], [0.0, 0.006], [0.004, 0.0]])
 

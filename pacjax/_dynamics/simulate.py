@@ -15,6 +15,8 @@ trajectory with respect to any scene or damping parameter, the initial state or 
 through diffrax's checkpointed adjoint.
 """
 
+import dataclasses
+
 import diffrax
 import equinox as eqx
 import jax
@@ -335,9 +337,13 @@ def integrate(scene, damping, controls, q0, qdot0, span, ts, dt0, opts: _Options
     """The compiled simulation of checked inputs (:func:`prepare`, :func:`aligned_rest_start`):
     one row of :func:`pacjax._dynamics.batch.simulate_batch`."""
     model = EquationsOfMotion.build(scene, damping, opts.phi_inertia, q0.dtype)
+    solver = opts.solver
+    if isinstance(solver, Rosenbrock23) and not callable(controls):
+        # Constant controls: the vector field does not depend on time (no T term to trace).
+        solver = dataclasses.replace(solver, autonomous=True)
     sol = diffrax.diffeqsolve(
         diffrax.ODETerm(vector_field),
-        opts.solver,
+        solver,
         t0=span[0],
         t1=span[1],
         dt0=dt0,
