@@ -94,10 +94,12 @@ def test_material_damping_is_kelvin_voigt(frame):
     model = EquationsOfMotion.build(scene, pj.Damping(stiffness=1.0), 1e-6, jnp.float64)
     zero = jnp.zeros(scene.n_dofs)
 
+    # Compiled (op by op the two matrices took ~200 small compilations).
+    @jax.jit
     def damping_matrix(q):
         return jax.jacfwd(lambda v: model.material_damping(q, v))(zero)
 
-    k0 = jax.hessian(scene.elastic_energy)(zero)
+    k0 = jax.jit(jax.hessian(scene.elastic_energy))(zero)
     np.testing.assert_allclose(damping_matrix(zero), k0, rtol=0, atol=1e-12 * float(k0.max()))
     c0 = 0.7  # q = [c0, phi, dL]
     d = damping_matrix(jnp.array([c0, 0.4, 0.0]))
