@@ -11,14 +11,8 @@ import numpy as np
 import pytest
 
 import pacjax as pj
-from pacjax.io.mocapfile import (
-    load_mocap,
-    matrix_to_quaternion,
-    motive_dataset,
-    quaternion_to_matrix,
-    read_motive_csv,
-    save_mocap,
-)
+from pacjax.io.mocapfile import load_mocap, matrix_to_quaternion, quaternion_to_matrix, save_mocap
+from pacjax.io.motive import motive_dataset, read_motive_csv
 
 DATA = pathlib.Path(__file__).resolve().parent / "data"
 SITES = [(0, 0.5), (0, 1.0), (1, 1.0, (0.0, 0.01, 0.0))]
@@ -273,3 +267,14 @@ def test_robot_without_tendons_and_a_turned_base_round_trip(tmp_path):
     back = load_mocap(tmp_path / "cable.csv")
     assert back.n_controls == 0
     np.testing.assert_allclose(back.base_rotation, turns, atol=1e-12)
+
+
+def test_motive_names_from_their_old_module_warn_and_work():
+    import pacjax.io.motive as motive
+    from pacjax.io import mocapfile
+
+    for name in ("read_motive_csv", "motive_dataset", "MotiveTake"):
+        with pytest.warns(DeprecationWarning, match=f"mocapfile.{name} is deprecated"):
+            assert getattr(mocapfile, name) is getattr(motive, name)
+    with pytest.raises(AttributeError, match="no_such_name"):
+        mocapfile.no_such_name  # noqa: B018

@@ -162,7 +162,7 @@ def _reject_motive_export(data_file: str) -> None:
         if f.readline().startswith("Format Version"):
             raise click.ClickException(
                 f"{data_file} is a Motive export: attach the robot's commands and pick static "
-                "frames with pacjax.io.mocapfile.motive_dataset, then save_mocap it"
+                "frames with pacjax.io.motive.motive_dataset, then save_mocap it"
             )
 
 
