@@ -57,7 +57,8 @@ def test_second_order_with_any_jacobian(jacobian):
 
 
 def test_stiff_van_der_pol_matches_kvaerno5():
-    """mu = 1000: L-stable steps through the fast transitions, dense output between them."""
+    """mu = 1000: L-stable steps through the fast transitions, dense output between them; the
+    same steps with ``autonomous=True``."""
 
     def vf(t, y, mu):
         x, v = y
@@ -65,7 +66,12 @@ def test_stiff_van_der_pol_matches_kvaerno5():
 
     ts = jnp.linspace(0.0, 3000.0, 7)
     ys = {}
-    for name, solver in (("ros", Rosenbrock23()), ("kv5", diffrax.Kvaerno5())):
+    solvers = (
+        ("ros", Rosenbrock23()),
+        ("ros_autonomous", Rosenbrock23(autonomous=True)),
+        ("kv5", diffrax.Kvaerno5()),
+    )
+    for name, solver in solvers:
         sol = diffrax.diffeqsolve(
             diffrax.ODETerm(vf),
             solver,
@@ -82,6 +88,9 @@ def test_stiff_van_der_pol_matches_kvaerno5():
         ys[name] = (sol.ys[0], jax.vmap(sol.evaluate)(ts + 0.5)[0])
     np.testing.assert_allclose(ys["ros"][0], ys["kv5"][0], atol=2e-4)
     np.testing.assert_allclose(ys["ros"][1], ys["kv5"][1], atol=2e-4)
+    # The problem is autonomous: leaving out T (exactly zero) changes no step.
+    np.testing.assert_array_equal(ys["ros_autonomous"][0], ys["ros"][0])
+    np.testing.assert_array_equal(ys["ros_autonomous"][1], ys["ros"][1])
 
 
 def test_gradient_through_adaptive_steps_matches_finite_differences():
