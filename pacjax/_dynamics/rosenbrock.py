@@ -50,7 +50,7 @@ class Rosenbrock23(diffrax.AbstractAdaptiveSolver):
             order). None: the exact one, by forward-mode differentiation of the vector field.
         autonomous: the vector field does not depend on ``t`` (constant controls), so ``T`` is
             zero. Its forward derivative in ``t`` is then left out: it traced the whole vector
-            field once more per step (a fifth of the dynamics' step program).
+            field once more per step.
     """
 
     term_structure: ClassVar = diffrax.AbstractTerm
