@@ -953,3 +953,53 @@ def test_structured_hessian_with_written_out_tendon_chords_is_the_autodiff_one(m
         assert np.abs(hess_ad).max() > 0
         np.testing.assert_allclose(grad, grad_ad, rtol=0, atol=1e-13 * np.abs(grad_ad).max())
         np.testing.assert_allclose(hess, hess_ad, rtol=0, atol=1e-13 * np.abs(hess_ad).max())
+
+
+# ------------------------------------------------------------------------------ rotations
+@pytest.mark.parametrize("dtype", [jnp.float64, jnp.float32], ids=["float64", "float32"])
+def test_rotation_primitives_against_the_exponential_series_and_smooth_at_zero(dtype):
+    """``exp_so3``, ``cross3`` and ``hat`` on rotation vectors (zero, on
+    both sides of the kernels' series threshold, large) against the exponential series and
+    ``np.cross``; the first and second derivatives of ``exp_so3`` at zero against the series."""
+    from pacjax._model.rotation import cross3, exp_so3, hat
+
+    def expm(k):
+        term, total = np.eye(3), np.eye(3)
+        for n in range(1, 40):
+            term = term @ k / n
+            total = total + term
+        return total
+
+    def skew(o):
+        return np.array([[0.0, -o[2], o[1]], [o[2], 0.0, -o[0]], [-o[1], o[0], 0.0]])
+
+    omegas = np.array(
+        [
+            [0, 0, 0],
+            [1e-4, -2e-4, 3e-4],
+            [0.018, 0.01, -0.02],  # |w|^2 = 8.2e-4: the series
+            [0.025, 0.01, -0.02],  # |w|^2 = 1.1e-3: the closed form
+            [0.4, -1.3, 2.2],
+        ]
+    )
+    v = np.array([0.3, -0.2, 1.1])
+    tol = 1e-14 if dtype == jnp.float64 else 2e-6
+    reference = np.stack([expm(skew(o)) for o in omegas])
+    vd = jnp.asarray(v, dtype)
+    rot, crossed, hats, first, second = jax.jit(
+        lambda w: (
+            jax.vmap(exp_so3)(w),
+            jnp.stack(cross3(w.T, vd), axis=-1),
+            jax.vmap(hat)(w),
+            jax.jacfwd(exp_so3)(w[0]),
+            jax.hessian(exp_so3)(w[0]),
+        )
+    )(jnp.asarray(omegas, dtype))
+    np.testing.assert_allclose(rot, reference, rtol=0, atol=tol)
+    np.testing.assert_allclose(crossed, np.cross(omegas, v), rtol=0, atol=tol)
+    np.testing.assert_allclose(hats, np.stack([skew(o) for o in omegas]), rtol=0, atol=tol)
+    # At zero: dR/dw_k = [e_k]x, and d2R/dw_j dw_k = ([e_j]x [e_k]x + [e_k]x [e_j]x) / 2.
+    generators = np.stack([skew(e) for e in np.eye(3)])
+    np.testing.assert_allclose(first, np.moveaxis(generators, 0, -1), rtol=0, atol=tol)
+    products = np.einsum("jab,kbc->acjk", generators, generators)
+    np.testing.assert_allclose(second, 0.5 * (products + np.swapaxes(products, 2, 3)), atol=tol)
