@@ -12,7 +12,13 @@ any broken property or exception with its traceback's last line) in
 what it did; ``--resume`` continues one at its next structure, and ``--minutes`` stops a run
 after its last structure that started within that time.
 
+Each structure runs in a child process. A draw that gives no result within ``--draw-seconds``
+(its structure's compilations included) is recorded as a ``hang`` and the child is killed; a
+child that dies (an abort inside XLA, a segmentation fault, memory) is recorded as a ``crash``
+with its exit status. Either way the campaign goes on with the next structure.
+
     python benchmarks/campaign.py --structures 200 --draws 50 [--seed 0] [--resume] [--minutes M]
+                                  [--draw-seconds S]
 """
 
 from __future__ import annotations
@@ -25,8 +31,10 @@ if "--xla_backend_optimization_level" not in os.environ.get("XLA_FLAGS", ""):
     os.environ["XLA_FLAGS"] = " ".join(
         filter(None, [os.environ.get("XLA_FLAGS"), "--xla_backend_optimization_level=0"])
     )
+import queue
 import subprocess
 import sys
+import threading
 import time
 import traceback
 import warnings
@@ -44,6 +52,8 @@ from scene_space import PropertyFailure, build, check, draw_structure, values  #
 OUT = ROOT / "benchmarks" / "results" / "campaign.json"
 #: Beyond the single and batch solves, on every draw (each one compilation per structure).
 OPERATIONS = ("gradient", "find_equilibria", "simulate")
+#: A child's line that carries a draw's record.
+_RECORD = "CAMPAIGN-RECORD "
 
 
 def run_structure(structure, draws: int, seed: int, on_draw=lambda record: None) -> list[dict]:
@@ -84,14 +94,78 @@ def run_structure(structure, draws: int, seed: int, on_draw=lambda record: None)
     return records
 
 
-def main(n_structures: int, draws: int, seed: int, resume: bool, minutes: float | None) -> dict:
-    warnings.simplefilter("ignore")
+def structures_of(n_structures: int, seed: int) -> list:
+    """The campaign's structures (the same in the parent and in every child)."""
     rng = np.random.default_rng(seed)
-    done = json.loads(OUT.read_text()) if resume and OUT.exists() else None
+    return [draw_structure(rng) for _ in range(n_structures)]
+
+
+def run_child(k: int, describe: str, plan: tuple, draw_seconds: float, on_draw) -> None:
+    """Structure ``k`` of the campaign ``plan = (structures, draws, seed)`` in a child process,
+    each draw's record passed to ``on_draw`` as it comes; a ``hang`` or ``crash`` record where
+    the child gives none within ``draw_seconds`` or dies."""
+    n_structures, draws, seed = plan
+    command = [sys.executable, __file__, "--child", str(k), "--structures", str(n_structures)]
+    command += ["--draws", str(draws), "--seed", str(seed)]
+    proc = subprocess.Popen(command, stdout=subprocess.PIPE, text=True)
+    lines: queue.Queue = queue.Queue()
+
+    def read():
+        for line in proc.stdout:
+            lines.put(line)
+        lines.put(None)
+
+    threading.Thread(target=read, daemon=True).start()
+    given, deadline = 0, time.perf_counter() + draw_seconds
+    while True:
+        try:
+            line = lines.get(timeout=max(deadline - time.perf_counter(), 0.0))
+        except queue.Empty:
+            proc.kill()
+            proc.wait()
+            on_draw(_failed(describe, "hang", f"draw {given}: no result in {draw_seconds:g} s"))
+            return
+        if line is None:
+            break
+        if line.startswith(_RECORD):
+            given += 1
+            on_draw(json.loads(line[len(_RECORD) :]))
+            deadline = time.perf_counter() + draw_seconds
+    status = proc.wait()
+    if status != 0:
+        on_draw(_failed(describe, "crash", f"draw {given}: the process ended with status {status}"))
+
+
+def _failed(describe: str, outcome: str, error: str) -> dict:
+    """The record of a draw that gave no result."""
+    return {"structure": describe, "outcome": outcome, "error": error, "seconds": None}
+
+
+def child(k: int, n_structures: int, draws: int, seed: int) -> None:
+    """Runs structure ``k``; one ``_RECORD`` line per draw on stdout."""
+    warnings.simplefilter("ignore")
+    structure = structures_of(n_structures, seed)[k]
+
+    def emit(record):
+        print(_RECORD + json.dumps(record), flush=True)
+
+    run_structure(structure, draws, seed + k, emit)
+
+
+def main(
+    n_structures: int,
+    draws: int,
+    seed: int,
+    resume: bool,
+    minutes: float | None,
+    draw_seconds: float = 900.0,
+    out: Path = OUT,
+) -> dict:
+    done = json.loads(out.read_text()) if resume and out.exists() else None
     records = done["records"] if done else []
     start = done["structures_done"] if done else 0
     records = [r for r in records if r.get("structure_index", 0) < start]
-    structures = [draw_structure(rng) for _ in range(n_structures)]
+    structures = structures_of(n_structures, seed)
     commit = subprocess.run(
         ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, cwd=ROOT
     ).stdout.strip()
@@ -109,10 +183,11 @@ def main(n_structures: int, draws: int, seed: int, resume: bool, minutes: float 
             "draws": len(records),
             "tally": dict(Counter(r["outcome"] for r in records)),
             "results": dict(Counter(r.get("single", "-") for r in records)),
+            "draw_seconds_limit": draw_seconds,
             "wall_s": previous_wall + time.perf_counter() - t0,
             "records": records,
         }
-        OUT.write_text(json.dumps(result, indent=1) + "\n")
+        out.write_text(json.dumps(result, indent=1) + "\n")
         return result
 
     result = save(start)
@@ -125,7 +200,7 @@ def main(n_structures: int, draws: int, seed: int, resume: bool, minutes: float 
             records.append(record)
             save(k)
 
-        run_structure(structures[k], draws, seed + k, on_draw)
+        run_child(k, structures[k].describe(), (n_structures, draws, seed), draw_seconds, on_draw)
         result = save(k + 1)
         print(f"{k + 1}/{n_structures} {structures[k].describe()}: {result['tally']}", flush=True)
     return result
@@ -138,5 +213,24 @@ if __name__ == "__main__":
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--resume", action="store_true")
     parser.add_argument("--minutes", type=float, help="start no structure after this time")
+    parser.add_argument(
+        "--draw-seconds",
+        type=float,
+        default=900.0,
+        help="a draw (with its structure's compilations) that takes longer is a hang",
+    )
+    parser.add_argument("--out", type=Path, default=OUT, help="the record (JSON)")
+    parser.add_argument("--child", type=int, help=argparse.SUPPRESS)
     args = parser.parse_args()
-    main(args.structures, args.draws, args.seed, args.resume, args.minutes)
+    if args.child is not None:
+        child(args.child, args.structures, args.draws, args.seed)
+    else:
+        main(
+            args.structures,
+            args.draws,
+            args.seed,
+            args.resume,
+            args.minutes,
+            args.draw_seconds,
+            args.out,
+        )
