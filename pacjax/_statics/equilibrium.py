@@ -7,9 +7,10 @@ the residual falls (pseudo-transient continuation, :mod:`pacjax._statics.ptc`): 
 equilibrium the
 steps follow the flow, near it they are Newton steps with the exact Jacobian, so the last steps
 *are* the Newton polish. ``D`` is the diagonal of the elastic stiffness, so the flow is well
-scaled. The loop runs inside ``optimistix.root_find`` with the implicit adjoint, so derivatives of
-the equilibrium with respect to any scene parameter or control come from the implicit function
-theorem (one linear solve), never from differentiating the iterations.
+scaled. The loop runs inside ``optimistix.root_find``, not differentiated: derivatives of the
+equilibrium with respect to any scene parameter or control come from the implicit function
+theorem with the continuation's last Jacobian (:mod:`pacjax._statics.implicit`: one directional
+derivative of the residual and one linear solve), never from differentiating the iterations.
 
 ``method="flow"`` first integrates the preconditioned flow with ``diffrax`` (an adaptive implicit
 Runge-Kutta method, stopped by a steady-state event) and then continues from there: slower, and
@@ -21,10 +22,10 @@ along its direction of negative curvature.
 """
 
 import diffrax
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import jax.tree_util as jtu
-import lineax as lx
 import numpy as np
 import optimistix as optx
 
@@ -42,6 +43,7 @@ from .._model.inputs import (
 from .._model.scene import Scene
 from .._results import CONVERGED_SADDLE, from_code
 from .continuation import conservative_part, retry_failed
+from .implicit import implicit_equilibrium
 from .options import SolverOptions, resolve_options
 from .problem import ScaledProblem, flow_field
 from .ptc import PseudoTransientContinuation, final_code, max_abs
@@ -137,7 +139,9 @@ def solve_core_linearised(scene: Scene, controls, q0, opts: SolverOptions):
     ``r = row * F``): ``(equilibrium, (jacobian, sigma, row))``, no derivative flowing through
     the last three."""
     opts = resolve_options(opts, q0.dtype)  # the precision's default tolerance
-    problem = ScaledProblem.build(scene, controls)
+    # The solve itself is not differentiated: the derivative of q comes from the implicit
+    # function theorem with the continuation's last Jacobian (implicit_equilibrium).
+    problem = ScaledProblem.build(*_without_derivative((scene, controls)))
     fixed = frozen(problem)
     y0 = start_point(problem, q0, opts)
     flow_steps = jnp.asarray(0)
@@ -152,11 +156,17 @@ def solve_core_linearised(scene: Scene, controls, q0, opts: SolverOptions):
         has_aux=True,
         max_steps=max_total_steps(opts),
         throw=False,
-        adjoint=optx.ImplicitAdjoint(linear_solver=lx.LU()),
     )
     steps = sol.stats["num_steps"] + flow_steps
     eq = equilibrium_from(scene, fixed, solver, sol.value, sol.state, steps, opts.tol)
-    return eq, jax.lax.stop_gradient((sol.state.jacobian, fixed.sigma, fixed.row))
+    linearised = jax.lax.stop_gradient((sol.state.jacobian, fixed.sigma, fixed.row))
+    q = implicit_equilibrium(scene, controls, eq.q, *linearised)
+    return eqx.tree_at(lambda e: e.q, eq, q), linearised
+
+
+def _without_derivative(tree):
+    """``tree`` with its floating-point arrays' derivatives stopped."""
+    return jax.tree.map(lambda x: jax.lax.stop_gradient(x) if eqx.is_inexact_array(x) else x, tree)
 
 
 def _solve_and_sag(scene: Scene, controls, q0, opts: SolverOptions):

@@ -14,8 +14,8 @@ bounded number of times, and the continuation then goes on until the stiffness i
 residual below the tolerance next to the saddle is not convergence; for a non-conservative problem
 only on the step after the escape, since the flow may lead back to the same point).
 
-Written as an ``optimistix.AbstractRootFinder`` so that ``optimistix.root_find`` runs the loop and
-provides the implicit-function-theorem adjoint: the Hessian graph is traced once.
+Written as an ``optimistix.AbstractRootFinder`` so that ``optimistix.root_find`` runs the loop; its
+state's last Jacobian gives the equilibrium's derivatives (:mod:`pacjax._statics.implicit`).
 """
 
 from typing import Any, NamedTuple
