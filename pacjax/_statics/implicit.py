@@ -6,9 +6,8 @@ continuation already holds ``dF/dq`` at its last iterate, scaled as it solves
 (``r(y) = row * F(sigma * y)``), so a derivative costs one directional derivative of the
 residual in the inputs and one dense solve. Differentiating the solver instead (optimistix's
 implicit adjoint) linearises the residual in ``q`` once more and, in reverse mode, transposes
-that: on the paper's robot with ``PolynomialCurvature(1)`` the first ``grad`` of the tip by the
-commands compiled in 76 s that way against 45 s this way, with the same gradient
-(``benchmarks/RESULTS.md``).
+that: a larger program, slower to compile, for the same derivative (``benchmarks/RESULTS.md``,
+"Equilibrium derivatives").
 """
 
 import functools
