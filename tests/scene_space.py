@@ -256,13 +256,18 @@ def _tip(scene, q) -> np.ndarray:
     return np.asarray(pj.tip_pose(scene, q)[0], float)
 
 
+#: Step limit of the campaign's 10 ms simulations (``check``'s ``"simulate"``).
+SIMULATE_MAX_STEPS = 5_000
+
+
 def check(
     scene: pj.Scene, controls: np.ndarray, dtype: str, operations: tuple[str, ...] = ()
 ) -> dict:
     """Solve ``scene`` singly and as a batch, and run the further ``operations`` (any of
     ``"gradient"``: the tip differentiated through the equilibrium; ``"find_equilibria"``: four
-    starts; ``"simulate"``: 10 ms of motion); raise :class:`PropertyFailure` on a broken
-    property. Returns what happened (result codes) for the campaign's tally."""
+    starts; ``"simulate"``: 10 ms of motion, at most ``SIMULATE_MAX_STEPS`` steps); raise
+    :class:`PropertyFailure` on a broken property. Returns what happened (result codes) for
+    the campaign's tally."""
     tol = TOLS[dtype]
     single = pj.solve_equilibrium(scene, controls, fallback=False)
     _check_result(single, scene, tol, "solve_equilibrium")
@@ -294,7 +299,14 @@ def check(
     if "simulate" in operations and all(
         float(seg.linear_density) > 0 for seg in scene.robot.segments
     ):
-        motion = pj.simulate(scene, (0.0, 0.01), controls, saveat=np.linspace(0.0, 0.01, 3))
+        # A few thousand steps bound a draw's time; beyond them the result code says so.
+        motion = pj.simulate(
+            scene,
+            (0.0, 0.01),
+            controls,
+            saveat=np.linspace(0.0, 0.01, 3),
+            max_steps=SIMULATE_MAX_STEPS,
+        )
         if bool(motion.successful):
             _require(
                 np.all(np.isfinite(np.asarray(motion.q))), "simulate: non-finite q, successful"
