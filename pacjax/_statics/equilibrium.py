@@ -141,12 +141,11 @@ def solve_core_linearised(scene: Scene, controls, q0, opts: SolverOptions):
     opts = resolve_options(opts, q0.dtype)  # the precision's default tolerance
     # The solve itself is not differentiated: the derivative of q comes from the implicit
     # function theorem with the continuation's last Jacobian (implicit_equilibrium).
-    problem = ScaledProblem.build(*_without_derivative((scene, controls)))
-    fixed = frozen(problem)
+    problem = ScaledProblem.build(*frozen((scene, controls)))
     y0 = start_point(problem, q0, opts)
     flow_steps = jnp.asarray(0)
     if opts.method == "flow":
-        y0, flow_steps = _flow_start(fixed, y0, opts)
+        y0, flow_steps = _flow_start(problem, y0, opts)
     solver = make_solver(scene, opts, q0.dtype)
     sol = optx.root_find(
         ScaledProblem.root_fn,
@@ -158,15 +157,10 @@ def solve_core_linearised(scene: Scene, controls, q0, opts: SolverOptions):
         throw=False,
     )
     steps = sol.stats["num_steps"] + flow_steps
-    eq = equilibrium_from(scene, fixed, solver, sol.value, sol.state, steps, opts.tol)
-    linearised = jax.lax.stop_gradient((sol.state.jacobian, fixed.sigma, fixed.row))
+    eq = equilibrium_from(scene, problem, solver, sol.value, sol.state, steps, opts.tol)
+    linearised = jax.lax.stop_gradient((sol.state.jacobian, problem.sigma, problem.row))
     q = implicit_equilibrium(scene, controls, eq.q, *linearised)
     return eqx.tree_at(lambda e: e.q, eq, q), linearised
-
-
-def _without_derivative(tree):
-    """``tree`` with its floating-point arrays' derivatives stopped."""
-    return jax.tree.map(lambda x: jax.lax.stop_gradient(x) if eqx.is_inexact_array(x) else x, tree)
 
 
 def _solve_and_sag(scene: Scene, controls, q0, opts: SolverOptions):
