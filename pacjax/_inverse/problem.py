@@ -106,28 +106,15 @@ class _Residual(eqx.Module):
 
 
 def _equilibrium(scene, u, q0, options):
-    """Equilibrium ``q*(u)`` with its derivative from the implicit function theorem.
+    """Equilibrium ``q*(u)``, its derivative by the implicit function theorem with the
+    continuation's last Jacobian (:mod:`pacjax._statics.implicit`, as every solve's): the
+    Levenberg-Marquardt Jacobians differentiate it in forward mode, one dense solve per
+    direction, never through the solver's iterations.
 
-    The solve itself is not differentiated: ``q*`` is found with gradients stopped, and the
-    derivative ``dq*/du = -(dF/dq)^-1 dF/du`` enters through one linearised Newton step at the
-    solution, ``q = q* - A^-1 F(q*, u)`` with ``A = dF/dq(q*)`` held constant (the solver's last
-    linearisation, :func:`pacjax._statics.equilibrium.linearised_equilibrium`), whose value part
-    is removed again (the step is below the solver's tolerance). That is the implicit function
-    theorem with one dense solve (``n_dofs`` is small), and it compiles far faster than
-    forward-mode differentiation of the solver's own implicit adjoint, which the
-    Levenberg-Marquardt Jacobians need. The system is scaled like the solver's (coordinates by
-    their natural size, rows by the elastic stiffness), so PAC's weak bending-plane angle does
-    not spoil the solve.
-
-    Returns ``(q, ok)``; ``ok`` is False for a failed or unstable solve or a singular ``A``.
+    Returns ``(q, ok)``; ``ok`` is False for a failed or unstable solve.
     """
-    eq, (jac, sigma, row) = linearised_equilibrium(scene, jax.lax.stop_gradient(u), q0, options)
-    q_star = jax.lax.stop_gradient(eq.q)
-    step = sigma * jnp.linalg.solve(jac, scene.residual(q_star, u) * row)
-    finite = jnp.all(jnp.isfinite(step))
-    step = jnp.where(finite, step, 0.0)
-    q = q_star - (step - jax.lax.stop_gradient(step))
-    return q, eq.converged & eq.stable & finite
+    eq, _ = linearised_equilibrium(scene, u, q0, options)
+    return eq.q, eq.converged & eq.stable
 
 
 def _residual(scene, target, limits, q0, z, options):
