@@ -79,7 +79,10 @@ def enable_compilation_cache(
         The cache directory.
 
     Call it before the first solve. The command line enables it by default
-    (``PACJAX_CACHE_DIR=DIR`` moves it, ``PACJAX_CACHE_DIR=off`` turns it off).
+    (``PACJAX_CACHE_DIR=DIR`` moves it, ``PACJAX_CACHE_DIR=off`` turns it off). With it on,
+    pacjax also keeps its traced programs in the directory's ``pacjax-programs`` folder, so
+    that a new process skips tracing as well as compiling (``PACJAX_STORED_PROGRAMS=0`` turns
+    that part off).
     """
     if not min_compile_time_s >= 0:
         raise ValueError(f"min_compile_time_s must be >= 0, got {min_compile_time_s}")

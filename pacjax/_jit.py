@@ -27,6 +27,8 @@ import threading
 import equinox as eqx
 import jax
 
+from ._stored import call_stored
+
 try:
     from jax.extend.core import get_opaque_trace_state
 except ImportError:  # an older jax: no options (they need to know that no trace is running)
@@ -83,7 +85,9 @@ def _top_level() -> bool:
 def jit(fn):
     """``equinox.filter_jit(fn)``; a top-level call compiles with :func:`compile_options` of
     the default backend (decided at the first call, not at import, so that the backend can
-    still be chosen after ``import pacjax``)."""
+    still be chosen after ``import pacjax``). With the compilation cache on, a top-level call
+    loads its traced program from disk where an earlier process stored it
+    (:mod:`pacjax._stored`)."""
     plain = eqx.filter_jit(fn)
     lock = threading.Lock()
     jitted = {}
@@ -93,10 +97,13 @@ def jit(fn):
         if not _top_level():
             return plain(*args, **kwargs)
         backend = jax.default_backend()
+        options = dict(compile_options(backend))
+        out = call_stored(fn, options, args, kwargs)
+        if out is not NotImplemented:
+            return out
         with lock:
             f = jitted.get(backend)
             if f is None:
-                options = dict(compile_options(backend))
                 f = eqx.filter_jit(fn, compiler_options=options) if options else plain
                 jitted[backend] = f
         return f(*args, **kwargs)

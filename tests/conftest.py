@@ -26,6 +26,9 @@ os.environ.setdefault(
     "PACJAX_CACHE_DIR", str(pathlib.Path(__file__).resolve().parent.parent / ".pytest-jax-cache")
 )
 _cache.enable_from_environment()
+# Traced programs are not stored (pacjax._stored): tests replace pacjax's functions at run time
+# and clear JAX's caches to trace them again, which a stored trace would not see.
+os.environ.setdefault("PACJAX_STORED_PROGRAMS", "0")
 
 
 @pytest.fixture(autouse=True, scope="module")

@@ -14,12 +14,13 @@ PACKAGE = pathlib.Path(__file__).resolve().parent.parent / "pacjax"
 #: its own group or of a lower layer; the groups of one layer are independent of each other
 #: (``_identify`` and ``_inverse`` are separate workflows).
 LAYERS = (
-    # foundations: float64 at import, numerical configuration, jit, the compilation cache, result
-    # codes, a root finder, old module paths
+    # foundations: float64 at import, numerical configuration, jit, stored traces, the
+    # compilation cache, result codes, a root finder, old module paths
     (
         (
             "pacjax._x64",
             "pacjax._config",
+            "pacjax._stored",
             "pacjax._jit",
             "pacjax._cache",
             "pacjax._results",
