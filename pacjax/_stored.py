@@ -116,7 +116,7 @@ def call_stored(fn, options: dict, args: tuple, kwargs: dict):
     """``fn(*args, **kwargs)`` through its stored program; ``NotImplemented`` where this call
     is not stored (the caller then traces it as before)."""
     folder = directory()
-    if folder is None or fn.__closure__:  # what a closure holds is not in the key
+    if folder is None or getattr(fn, "__closure__", None):  # a closure's cells are not keyed
         return NotImplemented
     dynamic, static = eqx.partition((args, kwargs), eqx.is_array)
     leaves, treedef = jax.tree.flatten(dynamic)
@@ -136,12 +136,16 @@ def call_stored(fn, options: dict, args: tuple, kwargs: dict):
     program = _memo.get(signature) if signature is not None else None
     if program is None:
         key = _key(fn, options, static_def, static_leaves, treedef, avals)
-        program = _memo.get((folder, key)) if key is not None else _PLAIN
-        if program is None:
-            program = _program(fn, options, folder, key, (static, treedef, avals))
-        with _lock:
-            _memo[(folder, key)] = program
-            if signature is not None:
+        if key is None:
+            program = _PLAIN
+        else:
+            program = _memo.get((folder, key)) or _program(
+                fn, options, folder, key, (static, treedef, avals)
+            )
+            with _lock:
+                _memo[(folder, key)] = program
+        if signature is not None:
+            with _lock:
                 _memo[signature] = program
     if program is _PLAIN:
         return NotImplemented
