@@ -176,9 +176,9 @@ _solve_linearised = jit(solve_core_linearised)
 
 
 def linearised_equilibrium(scene: Scene, controls, q0, options: SolverOptions):
-    """:func:`solve_equilibrium` without retries, and the scaled Jacobian at the solution with
-    its scaling (:func:`solve_core_linearised`): the implicit function theorem at an
-    equilibrium needs no other linearisation (the inverse solver)."""
+    """:func:`solve_equilibrium` without retries, traceable (the inverse solver calls it inside
+    its least-squares program), and the scaled Jacobian at the solution with its scaling
+    (:func:`solve_core_linearised`), the one the implicit derivative of ``q`` uses."""
     return _solve_linearised(*_prepared(scene, controls, q0), options)
 
 
