@@ -1,5 +1,5 @@
-"""The Rosenbrock-W solver (``pacjax._dynamics.rosenbrock``) and the dynamics' frozen-inertia
-Jacobian it is given by default."""
+"""The Rosenbrock-W solver (``pacjax._dynamics.rosenbrock``) and the Jacobian of the dynamics'
+stiff part it is given by default (``EquationsOfMotion.stiff_jacobian``)."""
 
 import diffrax
 import jax
@@ -11,6 +11,7 @@ from dynamics_scenes import CONTROLS, SCENE, small_scene
 import pacjax as pj
 from pacjax._dynamics.equations import EquationsOfMotion, vector_field, vector_field_jacobian
 from pacjax._dynamics.rosenbrock import Rosenbrock23
+from pacjax._model.inertia import mass_matrix
 from pacjax._model.inputs import as_traced_leaves
 
 A = jnp.array([[-1.0, 2.0], [-3.0, -50.0]])
@@ -124,8 +125,43 @@ def test_gradient_through_adaptive_steps_matches_finite_differences():
     assert abs(grad - fd) < 1e-6 * abs(fd)
 
 
+@pytest.mark.slow  # the reference compiles the forces' plain Hessian (16 s)
+def test_stiff_jacobian_is_the_forces_derivative_while_moving():
+    """In motion, with the tendons taut and stretching (their motors' damping pulling), the
+    Jacobian's acceleration rows are ``M^-1 dF`` of every force but inertia's, ``M`` held: the
+    structured Hessian with the motors' whole tension as springs, plus the damping's
+    derivatives, equals ``jax.jacfwd`` of the forces but for the one term it leaves out, the
+    motors' damping through the change of the tendons' Jacobian, ``J^T kappa_D (dJ/dq qdot)``."""
+    scene = as_traced_leaves(SCENE, jnp.float64)
+    model = EquationsOfMotion.build(scene, pj.Damping.modal(SCENE), 1e-6, jnp.float64)
+    n = scene.n_dofs
+    q = jnp.linspace(0.2, -0.3, n).at[-1].set(-0.002)
+    qdot = jnp.linspace(-1.0, 2.0, n)
+    slack = scene.rest_tendon_lengths() - scene.tendon_lengths(q)
+    u, udot = jnp.maximum(slack, 0.0) + jnp.array([0.004, 0.002]), jnp.array([0.05, -0.01])
+
+    stiff_jacobian = jax.jit(lambda q, qdot: model.stiff_jacobian(q, qdot, u, udot))
+
+    @jax.jit
+    def reference(q, qdot):
+        held = mass_matrix(scene, q)
+
+        def forces(x, v):
+            return model.forces(x, v, u, udot, held)
+
+        d_q, d_v = jax.jacfwd(forces, argnums=(0, 1))(q, qdot)
+        jac = jax.jacfwd(scene.tendon_lengths)(q)
+        rate_jac = jax.jacfwd(lambda x: jax.jvp(scene.tendon_lengths, (x,), (qdot,))[1])(q)
+        d_q = d_q + (jac.T * model.tendon_damping) @ rate_jac  # both taut: the gains are kappa_D
+        return jnp.linalg.solve(held, jnp.concatenate([d_q, d_v], axis=1))
+
+    stiff, ref = stiff_jacobian(q, qdot)[n:], reference(q, qdot)
+    scale = float(jnp.abs(ref).max())
+    np.testing.assert_allclose(stiff, ref, rtol=1e-9, atol=1e-10 * scale)
+
+
 @pytest.mark.slow  # the exact Jacobian compiles the kinematics' third derivatives
-def test_frozen_inertia_jacobian_is_exact_where_the_inertia_is_still():
+def test_stiff_jacobian_is_exact_where_the_inertia_is_still():
     """At rest in an equilibrium (no Coriolis forces, whose derivative in ``qdot`` vanishes
     there, and no net force for the mass matrix's derivative to act on), freezing the inertia
     leaves nothing out: the Jacobian equals the vector field's own. At rest anywhere, its

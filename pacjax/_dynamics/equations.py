@@ -1,5 +1,5 @@
 """The equations of motion: the paper's full model (its eq. 7) as a vector field and its
-frozen-inertia Jacobian, for :mod:`pacjax._dynamics.simulate`.
+stiff part's Jacobian, for :mod:`pacjax._dynamics.simulate`.
 
     M(q) qddot + C(q, qdot) qdot + G(q) + D qdot + K(q) = A(q) f_act + Q_ext(q)
 
@@ -34,6 +34,7 @@ from jaxtyping import Array, Float
 
 from .._config import MATMUL_PRECISION
 from .._model.energy import strain_rate_energy
+from .._model.hessian import energy_derivatives
 from .._model.inertia import PHI_INERTIA_FACTOR, body_dynamics, kinetic_energy, mass_matrix
 from .._model.inputs import as_traced_leaves, check_controls, check_q, solver_dtype
 from .._model.kinematics import jacobian_and_value
@@ -126,34 +127,64 @@ class EquationsOfMotion(eqx.Module):
         force = self.forces(q, qdot, u, udot, mass) - bias
         return lx.linear_solve(operator, force, lx.Cholesky(), throw=False).value
 
-    def frozen_inertia_jacobian(self, q, qdot, u, udot) -> Float[Array, "2n 2n"]:
+    def stiff_jacobian(self, q, qdot, u, udot) -> Float[Array, "2n 2n"]:
         """``d(qdot, qddot) / d(q, qdot)`` with the inertia frozen, for a W-method
         (:class:`pacjax._dynamics.rosenbrock.Rosenbrock23`, whose order does not depend on it).
 
-        ``qddot``'s rows are ``M(q)^-1 (dF/dq, dF/dqdot)`` with ``M`` held fixed, the Coriolis
-        forces left out, ``dF/dq`` the Hessian of the potential energy with the tendons as the
-        springs of their motors' proportional gains (the statics' energy), and ``dF/dqdot`` the
-        damping: material, mass-proportional, and the motors' derivative gains on taut tendons.
-        That is the stiff part of the dynamics; what is left out (the inertia's derivatives,
-        and the damping forces' derivatives in ``q``) is as slow as the motion, and is the
-        kinematics differentiated twice or three times.
+        ``qddot``'s rows are ``M(q)^-1 (dF/dq, dF/dqdot)`` with ``M`` held fixed and the Coriolis
+        forces left out: the derivatives of every other force, exact.
+
+        - ``dF/dq``: minus the Hessian of the potential energy (structured,
+          :func:`pacjax._model.hessian.energy_derivatives`) with each taut tendon a spring that
+          pulls as its motor does now, derivative gain included (:meth:`_spring_controls`):
+          the tendons' geometric stiffness is that of their whole tension, not of its static
+          part; then the material damping's derivative in ``q`` and the follower loads'.
+          Leaving the damping's share out (the potential's Hessian alone) cost four times as
+          many steps after a step command: the motors' damping tension is large while the
+          tendons move, and it bends the body through the tendons' curvature.
+        - ``dF/dqdot``: the damping: material, mass-proportional, and the motors' derivative
+          gains on taut tendons.
+
+        What is left out (the inertia's derivatives, the Coriolis forces', the
+        mass-proportional damping's in ``q``, and the motors' damping through the change of the
+        tendons' Jacobian, ``J^T kappa_D (dJ/dq qdot)``) is as slow as the motion, and is the
+        kinematics differentiated twice or three times (``benchmarks/RESULTS.md`` has the step
+        counts with and without each).
         """
         n = q.shape[0]
         scene = self.scene
         mass = mass_matrix(scene, q, self.phi_inertia)
-        d_q = -jax.hessian(scene.potential_energy)(q, u)
-        if not self.passive.is_conservative:
-            d_q = d_q + jax.jacfwd(self.passive.nonconservative_forces)(q)
         d_qdot = -self.damping.stiffness * jax.jacfwd(self.material_damping, argnums=1)(q, qdot)
         d_qdot = d_qdot - self.damping.mass * mass
+        springs = u
         if scene.tendons:
             jac, lengths = jacobian_and_value(scene.tendon_lengths, q)
-            _, gains = self._motor_law(lengths, jac @ qdot, u, udot)
+            rates = jnp.matmul(jac, qdot, precision=MATMUL_PRECISION)
+            _, gains = self._motor_law(lengths, rates, u, udot)
             d_qdot = d_qdot - jnp.matmul(jac.T * gains, jac, precision=MATMUL_PRECISION)
+            springs = self._spring_controls(rates, u, udot)
+        _, _, hessian = energy_derivatives(scene, q, springs)
+        d_q = -hessian - self.damping.stiffness * jax.jacfwd(self.material_damping)(q, qdot)
+        if not self.passive.is_conservative:
+            d_q = d_q + jax.jacfwd(self.passive.nonconservative_forces)(q)
         factor = jax.scipy.linalg.cho_factor(mass)
         lower = jax.scipy.linalg.cho_solve(factor, jnp.concatenate([d_q, d_qdot], axis=1))
         upper = jnp.concatenate([jnp.zeros((n, n), q.dtype), jnp.eye(n, dtype=q.dtype)], axis=1)
         return jnp.concatenate([upper, lower], axis=0)
+
+    def _spring_controls(self, rates, u, udot):
+        """Controls under which the statics' tendon springs pull as the motors do at tendon
+        rates ``rates``: ``kappa_P (l - l_bar') = kappa_P (l - l_bar) + kappa_D (l_dot +
+        l_bar_dot)``, i.e. ``u' = u + kappa_D / kappa_P (l_dot + u_dot)`` in length mode (the
+        gain is positive there); tension mode pulls with ``u`` already."""
+        out = []
+        for i, t in enumerate(self.scene.tendons):
+            if t.mode == "length":
+                ratio = self.tendon_damping[i] / t.gain.astype(u.dtype)
+                out.append(u[i] + ratio * (rates[i] + udot[i]))
+            else:
+                out.append(u[i])
+        return jnp.stack(out)
 
 
 def control_fn(controls, n_tendons: int, dtype) -> Callable:
@@ -245,8 +276,8 @@ def vector_field(t, y, args):
 
 
 def vector_field_jacobian(t, y, args):
-    """:meth:`EquationsOfMotion.frozen_inertia_jacobian` along the flattened state ``(q, qdot)``."""
+    """:meth:`EquationsOfMotion.stiff_jacobian` along the flattened state ``(q, qdot)``."""
     model, controls = args
     q, qdot = y
     u, udot = control_fn(controls, model.scene.n_tendons, q.dtype)(t)
-    return model.frozen_inertia_jacobian(q, qdot, u, udot)
+    return model.stiff_jacobian(q, qdot, u, udot)
