@@ -12,15 +12,22 @@ beam). Point masses have no rotational inertia. The kinetic energy
 
 is evaluated with one forward-mode derivative of the kinematics (``v, dR/dt = jvp``). From it:
 
-- the mass matrix ``M(q) = J_v^T m J_v + J_w^T I J_w`` from the Jacobians of the node
-  positions and angular velocities (one ``linearize`` of the kinematics, all directions at
-  once); it equals the Hessian of ``T`` in ``qdot`` (checked in the tests);
-- the Coriolis/centrifugal force ``C(q, qdot) qdot = d/dt(dT/dqdot) - dT/dq`` at zero
-  acceleration, straight from Lagrange's equations with ``jvp``/``grad``
-  (:func:`coriolis_forces`, the reference), or in forward mode only from second directional
-  derivatives of the kinematics (:func:`body_dynamics`, what the simulator uses: it compiles
-  several times faster, and the implicit solver differentiates it once more). No Christoffel
-  symbols are written by hand; the two agree to round-off (tested).
+- the mass matrix ``M(q) = J_v^T m J_v + J_w^T I J_w`` from the Jacobians of the mass points'
+  velocities and angular velocities; it equals the Hessian of ``T`` in ``qdot`` (checked in the
+  tests);
+- the Coriolis/centrifugal force ``C(q, qdot) qdot = J_v^T m a_0 + J_w^T (I alpha_0 + omega x
+  I omega)``, with ``a_0``, ``alpha_0`` the accelerations at zero ``qddot``. No Christoffel
+  symbols are written by hand.
+
+What the simulator uses (:func:`body_dynamics`) takes the Jacobians from the segments'
+structure, as the statics' Hessian does: segment ``j``'s coordinates move its own points
+through its local kinematics and everything beyond its end rigidly, so each segment's
+kinematics is differentiated along its own coordinates only, and the accelerations are one
+forward derivative of ``J(q) qdot`` (:func:`structured_body_dynamics`). Two references check
+it: the same quantities by forward derivatives of the whole chained kinematics
+(:func:`chained_body_dynamics`, also the path for mass points at sites known only at run
+time), and Lagrange's equations ``d/dt(dT/dqdot) - dT/dq`` by ``jvp``/``grad``
+(:func:`coriolis_forces`); all agree to round-off (tested).
 
 PCC's and PAC's bending-plane angle ``phi`` moves no mass when its segment is straight, so
 ``M`` is singular there (the same polar singularity as the Hessian of the elastic energy). A
@@ -37,9 +44,11 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from .._config import MATMUL_PRECISION
+from .kinematics import Knots, chain_segments
 from .loads import PointMass
 from .quadrature import gauss_legendre
 from .robot import known_sites
+from .rotation import cross3, matmul3, matvec3
 from .scene import Scene
 from .strain import PlanarCurvature
 
@@ -150,7 +159,13 @@ def mass_matrix(
     scene: Scene, q: Float[Array, " n_dofs"], phi_inertia: float = PHI_INERTIA_FACTOR
 ) -> Float[Array, "n_dofs n_dofs"]:
     """Generalised mass matrix ``M(q)`` (SI units of each coordinate pair), symmetric."""
-    return body_dynamics(scene, q, jnp.zeros_like(q), phi_inertia)[0]
+    groups = inertia_sites(scene, q.dtype)
+    if len(groups) > 1:
+        return chained_body_dynamics(scene, q, jnp.zeros_like(q), phi_inertia)[0]
+    ((segs, s, masses, moments),) = groups
+    knots = Knots(scene.n_segments, segs, s, scene.kinematics.min_intervals)
+    jac_pos, jac_ang = _site_jacobians(scene, q, knots)
+    return _mass_from_jacobians(scene, jac_pos, jac_ang, masses, moments, phi_inertia)
 
 
 def coriolis_forces(
@@ -178,6 +193,22 @@ def coriolis_forces(
 
 
 def body_dynamics(
+    scene: Scene,
+    q: Float[Array, " n_dofs"],
+    qdot: Float[Array, " n_dofs"],
+    phi_inertia: float = PHI_INERTIA_FACTOR,
+) -> tuple[Float[Array, "n_dofs n_dofs"], Float[Array, " n_dofs"]]:
+    """Mass matrix ``M(q)`` and Coriolis/centrifugal forces ``C(q, qdot) qdot``: from the
+    segments' structure (:func:`structured_body_dynamics`) when every mass point's site is
+    known at trace time, else by forward derivatives of the whole kinematics
+    (:func:`chained_body_dynamics`)."""
+    groups = inertia_sites(scene, q.dtype)
+    if len(groups) == 1:
+        return structured_body_dynamics(scene, q, qdot, phi_inertia)
+    return chained_body_dynamics(scene, q, qdot, phi_inertia)
+
+
+def chained_body_dynamics(
     scene: Scene,
     q: Float[Array, " n_dofs"],
     qdot: Float[Array, " n_dofs"],
@@ -228,3 +259,107 @@ def body_dynamics(
     if extra is not None:
         mat = mat + jnp.diag(extra)
     return 0.5 * (mat + mat.T), bias
+
+
+def _site_jacobians(
+    scene: Scene, q: Float[Array, " n_dofs"], knots: Knots
+) -> tuple[Float[Array, "p n_dofs 3"], Float[Array, "p n_dofs 3"]]:
+    """Jacobians of the world velocities and body angular velocities of the mass points
+    (the knots' requested points) along ``q``, from each segment's local Jacobian.
+
+    Segment ``j``'s coordinates move its own points through its local kinematics, and
+    every point beyond its end rigidly, with the twist its end frame gets: a point ``x`` of
+    a later segment moves by ``w x (x - e_j) + t`` (``w``, ``t`` the end frame's angular and
+    linear motion in the world, ``e_j`` its position) and turns with ``w``. Each segment's
+    kinematics is differentiated along its own ``d`` coordinates only
+    (:meth:`Scene.segment_frames_jacobian`, point by point along the bending angles for
+    PCC/PAC), not along all of the robot's as a Jacobian of the chained kinematics is.
+    """
+    dtype = q.dtype
+    coords = scene.coordinates(q)
+    n, d = coords.shape
+    lengths = scene.robot.stacked("length").astype(dtype)
+    grid = jnp.asarray(knots.s, dtype)
+    (d_rot, d_pos, _), (rot, pos, _) = jax.vmap(
+        lambda qi, li, ki: scene.segment_frames_jacobian(qi, li, ki, None)
+    )(coords, lengths, grid)
+    base_rot, base_pos = chain_segments(
+        rot[:, -1], pos[:, -1], scene.robot.base_rotation, scene.robot.base_position
+    )
+    world_rot = matmul3(base_rot[:, None], rot)  # (n, k, 3, 3)
+    world_pos = base_pos[:, None] + matvec3(base_rot[:, None], pos)  # (n, k, 3)
+    mm = MATMUL_PRECISION
+    # Own segment: the local derivatives, turned into the world (positions) or read in the
+    # point's own frame (angular velocities: vee(R^T dR)).
+    own_pos = jnp.einsum("iab,ipbk->ipka", base_rot, d_pos, precision=mm)
+    own_ang = _vee_skew(jnp.einsum("ipba,ipbck->ipkac", rot, d_rot, precision=mm))
+    # Beyond segment j's end: the end frame's twist in the world, vee(dE E^T) turned.
+    end_ang = _vee_skew(jnp.einsum("jabk,jcb->jkac", d_rot[:, -1], rot[:, -1], precision=mm))
+    end_ang = jnp.einsum("jab,jkb->jka", base_rot, end_ang, precision=mm)  # (n, d, 3)
+    end_lin = own_pos[:, -1]  # (n, d, 3)
+    lever = world_pos[:, :, None, :] - world_pos[None, None, :, -1, :]  # (i, p, j, 3)
+    far_pos = (
+        jnp.stack(
+            cross3(
+                tuple(end_ang[None, None, :, :, a] for a in range(3)),
+                tuple(lever[:, :, :, None, a] for a in range(3)),
+            ),
+            axis=-1,
+        )
+        + end_lin[None, None]
+    )  # (i, p, j, k, 3)
+    far_ang = jnp.einsum("ipba,jkb->ipjka", world_rot, end_ang, precision=mm)
+    rows = np.arange(n)
+    beyond = jnp.asarray(rows[:, None] > rows[None, :], dtype)[:, None, :, None, None]
+    same = jnp.asarray(np.eye(n), dtype)[:, None, :, None, None]
+    jac_pos = beyond * far_pos + same * own_pos[:, :, None]
+    jac_ang = beyond * far_ang + same * own_ang[:, :, None]
+    free = scene.free_coordinates()
+
+    def at_sites(jac):
+        flat = knots.select(jac).reshape(-1, n * d, 3)
+        return flat if free is None else flat[:, free]
+
+    return at_sites(jac_pos), at_sites(jac_ang)
+
+
+def structured_body_dynamics(
+    scene: Scene,
+    q: Float[Array, " n_dofs"],
+    qdot: Float[Array, " n_dofs"],
+    phi_inertia: float = PHI_INERTIA_FACTOR,
+) -> tuple[Float[Array, "n_dofs n_dofs"], Float[Array, " n_dofs"]]:
+    """:func:`chained_body_dynamics`' ``M`` and ``C qdot`` from the segments' local
+    Jacobians (:func:`_site_jacobians`), for mass points whose sites are all known.
+
+    ``M = J_v^T m J_v + J_w^T I J_w``; the bias needs the points' accelerations at zero
+    ``qddot``, ``a_0 = (dJ_v/dq qdot) qdot`` and likewise ``alpha_0``: one forward derivative
+    of the velocities ``J(q) qdot`` along ``qdot``.
+    """
+    dtype = q.dtype
+    ((segs, s, masses, moments),) = inertia_sites(scene, dtype)
+    knots = Knots(scene.n_segments, segs, s, scene.kinematics.min_intervals)
+    mm = MATMUL_PRECISION
+
+    def velocities(x):
+        jac_pos, jac_ang = _site_jacobians(scene, x, knots)
+        vel = jnp.einsum("pia,i->pa", jac_pos, qdot, precision=mm)
+        omega = jnp.einsum("pia,i->pa", jac_ang, qdot, precision=mm)
+        return (vel, omega), (jac_pos, jac_ang)
+
+    (_, omega), (acc, alpha), (jac_pos, jac_ang) = jax.jvp(velocities, (q,), (qdot,), has_aux=True)
+    euler = moments * alpha + jnp.cross(omega, moments * omega)
+    bias = jnp.einsum("pia,p,pa->i", jac_pos, masses, acc, precision=mm)
+    bias = bias + jnp.einsum("pia,pa->i", jac_ang, euler, precision=mm)
+    return _mass_from_jacobians(scene, jac_pos, jac_ang, masses, moments, phi_inertia), bias
+
+
+def _mass_from_jacobians(scene: Scene, jac_pos, jac_ang, masses, moments, phi_inertia: float):
+    """``J_v^T m J_v + J_w^T I J_w`` plus the regularising inertia on ``phi``, symmetric."""
+    mm = MATMUL_PRECISION
+    mat = jnp.einsum("pia,p,pja->ij", jac_pos, masses, jac_pos, precision=mm)
+    mat = mat + jnp.einsum("pia,pa,pja->ij", jac_ang, moments, jac_ang, precision=mm)
+    extra = coordinate_inertia(scene, jac_pos.dtype, phi_inertia)
+    if extra is not None:
+        mat = mat + jnp.diag(extra)
+    return 0.5 * (mat + mat.T)
