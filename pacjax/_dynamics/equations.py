@@ -145,11 +145,12 @@ class EquationsOfMotion(eqx.Module):
         - ``dF/dqdot``: the damping: material, mass-proportional, and the motors' derivative
           gains on taut tendons.
 
-        What is left out (the inertia's derivatives, the Coriolis forces', the
-        mass-proportional damping's in ``q``, and the motors' damping through the change of the
-        tendons' Jacobian, ``J^T kappa_D (dJ/dq qdot)``) is as slow as the motion, and is the
-        kinematics differentiated twice or three times (``benchmarks/RESULTS.md`` has the step
-        counts with and without each).
+        Left out: the mass-proportional damping's derivative in ``q``, the motors' damping
+        through the change of the tendons' Jacobian (``J^T kappa_D (dJ/dq qdot)``), and the
+        inertial forces' derivatives (``d(M a + C qdot)``: the kinematics' third derivatives).
+        The last matter where PAC's plane angle swings round a segment passing near straight:
+        with them the steps were several times fewer, but each Jacobian several times dearer,
+        and the simulation slower on CPU (``benchmarks/RESULTS.md`` has the counts and times).
         """
         n = q.shape[0]
         scene = self.scene

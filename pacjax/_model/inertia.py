@@ -38,6 +38,8 @@ mode then has a frequency of the order of the first bending mode, so it adds no 
 and its relative effect on a bent segment is of the order of the factor.
 """
 
+from typing import NamedTuple
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -162,8 +164,7 @@ def mass_matrix(
     groups = inertia_sites(scene, q.dtype)
     if len(groups) > 1:
         return chained_body_dynamics(scene, q, jnp.zeros_like(q), phi_inertia)[0]
-    ((segs, s, masses, moments),) = groups
-    knots = Knots(scene.n_segments, segs, s, scene.kinematics.min_intervals)
+    knots, masses, moments = _site_knots(scene, q.dtype)
     jac_pos, jac_ang = _site_jacobians(scene, q, knots)
     return _mass_from_jacobians(scene, jac_pos, jac_ang, masses, moments, phi_inertia)
 
@@ -261,6 +262,33 @@ def chained_body_dynamics(
     return 0.5 * (mat + mat.T), bias
 
 
+class _SegmentFrames(NamedTuple):
+    """Every segment's frames at its knots, local (in its base frame) with their derivatives
+    along its own coordinates, and in the world."""
+
+    rot: Array  # (n, k, 3, 3) local rotations
+    d_rot: Array  # (n, k, 3, 3, d)
+    d_pos: Array  # (n, k, 3, d)
+    base_rot: Array  # (n, 3, 3) world rotation of each segment's base
+    world_rot: Array  # (n, k, 3, 3)
+    world_pos: Array  # (n, k, 3)
+
+
+def _segment_frames(scene: Scene, q: Float[Array, " n_dofs"], knots: Knots) -> _SegmentFrames:
+    dtype = q.dtype
+    lengths = scene.robot.stacked("length").astype(dtype)
+    grid = jnp.asarray(knots.s, dtype)
+    (d_rot, d_pos, _), (rot, pos, _) = jax.vmap(
+        lambda qi, li, ki: scene.segment_frames_jacobian(qi, li, ki, None)
+    )(scene.coordinates(q), lengths, grid)
+    base_rot, base_pos = chain_segments(
+        rot[:, -1], pos[:, -1], scene.robot.base_rotation, scene.robot.base_position
+    )
+    world_rot = matmul3(base_rot[:, None], rot)
+    world_pos = base_pos[:, None] + matvec3(base_rot[:, None], pos)
+    return _SegmentFrames(rot, d_rot, d_pos, base_rot, world_rot, world_pos)
+
+
 def _site_jacobians(
     scene: Scene, q: Float[Array, " n_dofs"], knots: Knots
 ) -> tuple[Float[Array, "p n_dofs 3"], Float[Array, "p n_dofs 3"]]:
@@ -275,29 +303,19 @@ def _site_jacobians(
     (:meth:`Scene.segment_frames_jacobian`, point by point along the bending angles for
     PCC/PAC), not along all of the robot's as a Jacobian of the chained kinematics is.
     """
+    f = _segment_frames(scene, q, knots)
+    n, _, _, d = f.d_pos.shape
     dtype = q.dtype
-    coords = scene.coordinates(q)
-    n, d = coords.shape
-    lengths = scene.robot.stacked("length").astype(dtype)
-    grid = jnp.asarray(knots.s, dtype)
-    (d_rot, d_pos, _), (rot, pos, _) = jax.vmap(
-        lambda qi, li, ki: scene.segment_frames_jacobian(qi, li, ki, None)
-    )(coords, lengths, grid)
-    base_rot, base_pos = chain_segments(
-        rot[:, -1], pos[:, -1], scene.robot.base_rotation, scene.robot.base_position
-    )
-    world_rot = matmul3(base_rot[:, None], rot)  # (n, k, 3, 3)
-    world_pos = base_pos[:, None] + matvec3(base_rot[:, None], pos)  # (n, k, 3)
     mm = MATMUL_PRECISION
     # Own segment: the local derivatives, turned into the world (positions) or read in the
     # point's own frame (angular velocities: vee(R^T dR)).
-    own_pos = jnp.einsum("iab,ipbk->ipka", base_rot, d_pos, precision=mm)
-    own_ang = _vee_skew(jnp.einsum("ipba,ipbck->ipkac", rot, d_rot, precision=mm))
+    own_pos = jnp.einsum("iab,ipbk->ipka", f.base_rot, f.d_pos, precision=mm)
+    own_ang = _vee_skew(jnp.einsum("ipba,ipbck->ipkac", f.rot, f.d_rot, precision=mm))
     # Beyond segment j's end: the end frame's twist in the world, vee(dE E^T) turned.
-    end_ang = _vee_skew(jnp.einsum("jabk,jcb->jkac", d_rot[:, -1], rot[:, -1], precision=mm))
-    end_ang = jnp.einsum("jab,jkb->jka", base_rot, end_ang, precision=mm)  # (n, d, 3)
+    end_ang = _vee_skew(jnp.einsum("jabk,jcb->jkac", f.d_rot[:, -1], f.rot[:, -1], precision=mm))
+    end_ang = jnp.einsum("jab,jkb->jka", f.base_rot, end_ang, precision=mm)  # (n, d, 3)
     end_lin = own_pos[:, -1]  # (n, d, 3)
-    lever = world_pos[:, :, None, :] - world_pos[None, None, :, -1, :]  # (i, p, j, 3)
+    lever = f.world_pos[:, :, None, :] - f.world_pos[None, None, :, -1, :]  # (i, p, j, 3)
     far_pos = (
         jnp.stack(
             cross3(
@@ -308,7 +326,7 @@ def _site_jacobians(
         )
         + end_lin[None, None]
     )  # (i, p, j, k, 3)
-    far_ang = jnp.einsum("ipba,jkb->ipjka", world_rot, end_ang, precision=mm)
+    far_ang = jnp.einsum("ipba,jkb->ipjka", f.world_rot, end_ang, precision=mm)
     rows = np.arange(n)
     beyond = jnp.asarray(rows[:, None] > rows[None, :], dtype)[:, None, :, None, None]
     same = jnp.asarray(np.eye(n), dtype)[:, None, :, None, None]
@@ -323,6 +341,55 @@ def _site_jacobians(
     return at_sites(jac_pos), at_sites(jac_ang)
 
 
+def _site_velocities(
+    scene: Scene, q: Float[Array, " n_dofs"], qdot: Float[Array, " n_dofs"], knots: Knots
+) -> tuple[Float[Array, "p 3"], Float[Array, "p 3"]]:
+    """World velocities and body angular velocities of the mass points: :func:`_site_jacobians`
+    times ``qdot`` without forming the Jacobians. The twists of the segments' ends add up: a
+    point ``x`` of segment ``i`` moves rigidly with ``(sum_{j<i} w_j) x x + sum_{j<i} (t_j -
+    w_j x e_j)``, plus its own segment's local motion."""
+    f = _segment_frames(scene, q, knots)
+    rates = jax.jvp(scene.coordinates, (q,), (qdot,))[1]  # (n, d), zero on pinned coordinates
+    mm = MATMUL_PRECISION
+    loc_rot = jnp.einsum("ipabk,ik->ipab", f.d_rot, rates, precision=mm)
+    loc_pos = jnp.einsum("ipak,ik->ipa", f.d_pos, rates, precision=mm)
+    own_vel = matvec3(f.base_rot[:, None], loc_pos)
+    own_ang = _vee_skew(matmul3(jnp.swapaxes(f.rot, -1, -2), loc_rot))
+    end_turn = matmul3(loc_rot[:, -1], jnp.swapaxes(f.rot[:, -1], -1, -2))
+    end_ang = matvec3(f.base_rot, _vee_skew(end_turn))
+    spin = jnp.cumsum(end_ang, axis=0) - end_ang  # the angular velocity of each segment's base
+    shift = own_vel[:, -1] - jnp.cross(end_ang, f.world_pos[:, -1])
+    drift = jnp.cumsum(shift, axis=0) - shift
+    vel = drift[:, None] + jnp.cross(spin[:, None], f.world_pos) + own_vel
+    omega = matvec3(jnp.swapaxes(f.world_rot, -1, -2), spin[:, None]) + own_ang
+    return knots.select(vel), knots.select(omega)
+
+
+def _site_motion(scene: Scene, q, qdot, knots: Knots):
+    """The mass points' Jacobians (:func:`_site_jacobians`), body angular velocities, and
+    accelerations at zero ``qddot``: ``a_0 = (dJ_v/dq qdot) qdot`` and likewise ``alpha_0``,
+    one forward derivative of the velocities (:func:`_site_velocities`) along ``qdot``."""
+    jac_pos, jac_ang = _site_jacobians(scene, q, knots)
+    (_, omega), (acc, alpha) = jax.jvp(
+        lambda x: _site_velocities(scene, x, qdot, knots), (q,), (qdot,)
+    )
+    return jac_pos, jac_ang, omega, acc, alpha
+
+
+def _site_knots(scene: Scene, dtype):
+    """The single group of mass points with known sites, and the knots that hold them."""
+    ((segs, s, masses, moments),) = inertia_sites(scene, dtype)
+    return Knots(scene.n_segments, segs, s, scene.kinematics.min_intervals), masses, moments
+
+
+def _inertial_forces(jac_pos, jac_ang, masses, moments, omega, acc, alpha):
+    """``J_v^T m a + J_w^T (I alpha + omega x I omega)``."""
+    mm = MATMUL_PRECISION
+    euler = moments * alpha + jnp.cross(omega, moments * omega)
+    force = jnp.einsum("pia,p,pa->i", jac_pos, masses, acc, precision=mm)
+    return force + jnp.einsum("pia,pa->i", jac_ang, euler, precision=mm)
+
+
 def structured_body_dynamics(
     scene: Scene,
     q: Float[Array, " n_dofs"],
@@ -330,27 +397,10 @@ def structured_body_dynamics(
     phi_inertia: float = PHI_INERTIA_FACTOR,
 ) -> tuple[Float[Array, "n_dofs n_dofs"], Float[Array, " n_dofs"]]:
     """:func:`chained_body_dynamics`' ``M`` and ``C qdot`` from the segments' local
-    Jacobians (:func:`_site_jacobians`), for mass points whose sites are all known.
-
-    ``M = J_v^T m J_v + J_w^T I J_w``; the bias needs the points' accelerations at zero
-    ``qddot``, ``a_0 = (dJ_v/dq qdot) qdot`` and likewise ``alpha_0``: one forward derivative
-    of the velocities ``J(q) qdot`` along ``qdot``.
-    """
-    dtype = q.dtype
-    ((segs, s, masses, moments),) = inertia_sites(scene, dtype)
-    knots = Knots(scene.n_segments, segs, s, scene.kinematics.min_intervals)
-    mm = MATMUL_PRECISION
-
-    def velocities(x):
-        jac_pos, jac_ang = _site_jacobians(scene, x, knots)
-        vel = jnp.einsum("pia,i->pa", jac_pos, qdot, precision=mm)
-        omega = jnp.einsum("pia,i->pa", jac_ang, qdot, precision=mm)
-        return (vel, omega), (jac_pos, jac_ang)
-
-    (_, omega), (acc, alpha), (jac_pos, jac_ang) = jax.jvp(velocities, (q,), (qdot,), has_aux=True)
-    euler = moments * alpha + jnp.cross(omega, moments * omega)
-    bias = jnp.einsum("pia,p,pa->i", jac_pos, masses, acc, precision=mm)
-    bias = bias + jnp.einsum("pia,pa->i", jac_ang, euler, precision=mm)
+    Jacobians (:func:`_site_jacobians`), for mass points whose sites are all known."""
+    knots, masses, moments = _site_knots(scene, q.dtype)
+    jac_pos, jac_ang, omega, acc, alpha = _site_motion(scene, q, qdot, knots)
+    bias = _inertial_forces(jac_pos, jac_ang, masses, moments, omega, acc, alpha)
     return _mass_from_jacobians(scene, jac_pos, jac_ang, masses, moments, phi_inertia), bias
 
 
