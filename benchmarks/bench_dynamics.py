@@ -32,7 +32,7 @@ import pacjax as pj
 
 STEP = np.array([0.04, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0])
 MODELS = {"PAC": pj.PAC, "PCC": pj.PCC, "Poly2": lambda: pj.PolynomialCurvature(2)}
-SOLVERS = {"rosenbrock23": pj.dynamics.rosenbrock23, "kvaerno5": lambda: None}
+SOLVERS = {"rosenbrock23": pj.dynamics.rosenbrock23, "kvaerno5": pj.dynamics.kvaerno5}
 
 
 def _time(fn):

@@ -1,5 +1,6 @@
 """Dynamics: the paper's full model (its eq. 7) integrated in time (see :func:`simulate`)."""
 
+from ._chord import kvaerno5 as kvaerno5
 from ._dynamics.batch import simulate_batch as simulate_batch
 from ._dynamics.damping import DEFAULT_DAMPING_RATIO as DEFAULT_DAMPING_RATIO
 from ._dynamics.damping import Damping as Damping
