@@ -1,5 +1,5 @@
 """The equations of motion: the paper's full model (its eq. 7) as a vector field and its
-stiff part's Jacobian, for :mod:`pacjax._dynamics.simulate`.
+Jacobian with the inertia held, for :mod:`pacjax._dynamics.simulate`.
 
     M(q) qddot + C(q, qdot) qdot + G(q) + D qdot + K(q) = A(q) f_act + Q_ext(q)
 
@@ -132,16 +132,16 @@ class EquationsOfMotion(eqx.Module):
         (:class:`pacjax._dynamics.rosenbrock.Rosenbrock23`, whose order does not depend on it).
 
         ``qddot``'s rows are ``M(q)^-1 (dF/dq, dF/dqdot)`` with ``M`` held fixed and the Coriolis
-        forces left out: the derivatives of every other force, exact.
+        forces left out: the derivatives of every other force but two slow terms (below).
 
         - ``dF/dq``: minus the Hessian of the potential energy (structured,
           :func:`pacjax._model.hessian.energy_derivatives`) with each taut tendon a spring that
           pulls as its motor does now, derivative gain included (:meth:`_spring_controls`):
           the tendons' geometric stiffness is that of their whole tension, not of its static
           part; then the material damping's derivative in ``q`` and the follower loads'.
-          Leaving the damping's share out (the potential's Hessian alone) cost four times as
-          many steps after a step command: the motors' damping tension is large while the
-          tendons move, and it bends the body through the tendons' curvature.
+          The motors' damping tension is large while the tendons move, and it bends the body
+          through the tendons' curvature: without its share the steps after a step command
+          were several times shorter.
         - ``dF/dqdot``: the damping: material, mass-proportional, and the motors' derivative
           gains on taut tendons.
 
