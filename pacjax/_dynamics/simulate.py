@@ -5,9 +5,9 @@ The state ``(q, qdot)`` is integrated with adaptive steps (PID controller) by a 
 the tendon springs, the axial stiffness and the stiffness-proportional damping are fast against
 the soft body's motion. At moderate tolerances (``rtol >= 1e-5``) the default is
 :class:`pacjax._dynamics.rosenbrock.Rosenbrock23`, a linearly implicit W-method, with the
-Jacobian of its stiff part (``EquationsOfMotion.stiff_jacobian``): the derivatives of every force
-but inertia's, without the inertia's derivatives, which are slow and the dearest part of an
-exact Jacobian. At tight ones it is ``diffrax.Kvaerno5`` (L-stable, 5th order), whose
+Jacobian of its stiff part (``EquationsOfMotion.stiff_jacobian``): the forces' derivatives with
+the inertia held, without the inertia's own derivatives, the dearest part of an exact
+Jacobian. At tight ones it is ``diffrax.Kvaerno5`` (L-stable, 5th order), whose
 stage equations are solved by diffrax's chord method with the Jacobian taken in forward mode
 (:class:`pacjax._chord.DenseChord`). The vector field takes the model and controls as
 arguments, not by closure, so that its trace and its derivatives' are made once. Gradients of a

@@ -365,29 +365,10 @@ def _site_velocities(
     return knots.select(vel), knots.select(omega)
 
 
-def _site_motion(scene: Scene, q, qdot, knots: Knots):
-    """The mass points' Jacobians (:func:`_site_jacobians`), body angular velocities, and
-    accelerations at zero ``qddot``: ``a_0 = (dJ_v/dq qdot) qdot`` and likewise ``alpha_0``,
-    one forward derivative of the velocities (:func:`_site_velocities`) along ``qdot``."""
-    jac_pos, jac_ang = _site_jacobians(scene, q, knots)
-    (_, omega), (acc, alpha) = jax.jvp(
-        lambda x: _site_velocities(scene, x, qdot, knots), (q,), (qdot,)
-    )
-    return jac_pos, jac_ang, omega, acc, alpha
-
-
 def _site_knots(scene: Scene, dtype):
     """The single group of mass points with known sites, and the knots that hold them."""
     ((segs, s, masses, moments),) = inertia_sites(scene, dtype)
     return Knots(scene.n_segments, segs, s, scene.kinematics.min_intervals), masses, moments
-
-
-def _inertial_forces(jac_pos, jac_ang, masses, moments, omega, acc, alpha):
-    """``J_v^T m a + J_w^T (I alpha + omega x I omega)``."""
-    mm = MATMUL_PRECISION
-    euler = moments * alpha + jnp.cross(omega, moments * omega)
-    force = jnp.einsum("pia,p,pa->i", jac_pos, masses, acc, precision=mm)
-    return force + jnp.einsum("pia,pa->i", jac_ang, euler, precision=mm)
 
 
 def structured_body_dynamics(
@@ -399,8 +380,16 @@ def structured_body_dynamics(
     """:func:`chained_body_dynamics`' ``M`` and ``C qdot`` from the segments' local
     Jacobians (:func:`_site_jacobians`), for mass points whose sites are all known."""
     knots, masses, moments = _site_knots(scene, q.dtype)
-    jac_pos, jac_ang, omega, acc, alpha = _site_motion(scene, q, qdot, knots)
-    bias = _inertial_forces(jac_pos, jac_ang, masses, moments, omega, acc, alpha)
+    jac_pos, jac_ang = _site_jacobians(scene, q, knots)
+    # The accelerations at zero qddot, a_0 = (dJ/dq qdot) qdot: the velocities' derivative
+    # along qdot.
+    (_, omega), (acc, alpha) = jax.jvp(
+        lambda x: _site_velocities(scene, x, qdot, knots), (q,), (qdot,)
+    )
+    mm = MATMUL_PRECISION
+    euler = moments * alpha + jnp.cross(omega, moments * omega)
+    bias = jnp.einsum("pia,p,pa->i", jac_pos, masses, acc, precision=mm)
+    bias = bias + jnp.einsum("pia,pa->i", jac_ang, euler, precision=mm)
     return _mass_from_jacobians(scene, jac_pos, jac_ang, masses, moments, phi_inertia), bias
 
 
