@@ -9,7 +9,7 @@ iterate's, so it follows one branch; two things can go wrong:
   step is rejected (the optimiser shrinks it), never accepted as a decrease of the loss;
 - the branch followed is not the one the data were recorded on (the fit started on another, or
   the data's branch did not exist at the starting values). Only other equilibria can tell: the
-  frames are solved again from scattered starts (the same compiled batch solve) and a frame
+  frames are solved again from scattered starts (one batch, the same compiled solver) and a frame
   whose markers another stable equilibrium fits clearly better is moved to it. The fit checks
   at its start and whenever it stops, and resumes after a move; it reports success only when
   its last check moved nothing.
@@ -105,8 +105,7 @@ class BranchTracker:
         best_q = current.q.copy()
         best = self._rmse(current)
         found = [np.where(current.valid[:n, None, None], current.pred, np.nan)]
-        for start in self.starts:
-            other = train(theta, q0=np.broadcast_to(start, current.q.shape), retry=False)
+        for other in train.from_starts(theta, self.starts):
             err = self._rmse(other)
             better = (err < BETTER_FRACTION * best) & (err < best - MARGIN_NOISE * self.noise)
             best_q[:n][better], best[better] = other.q[:n][better], err[better]

@@ -502,13 +502,16 @@ class Evaluator:
         self.prior = prior
         self.count = 0
 
-    def _solve(self, scene, q0):
+    def _solve(self, scene, q0, repeats: int = 1):
+        """Every frame's equilibrium from ``q0`` ((frames, n) or (repeats * frames, n) rows,
+        the frames repeated ``repeats`` times)."""
         d = self.data
+        tile = lambda x: None if x is None else np.concatenate([x] * repeats)  # noqa: E731
         eq = solve_batch(
             scene,
-            d.controls,
+            tile(d.controls),
             q0=q0,
-            params=d.rows,
+            params=None if d.rows is None else jax.tree.map(tile, d.rows),
             update=self.problem.frame_loads if d.rows is not None else None,
             chunk_size=self.chunk,
             progress=False,
@@ -517,20 +520,39 @@ class Evaluator:
         q = np.array(eq.q)
         return q, np.asarray(eq.converged) & np.asarray(eq.stable) & np.all(np.isfinite(q), 1)
 
-    def __call__(self, theta, q0=None, retry: bool = True):
+    def __call__(self, theta, q0=None):
         """The frames' equilibria at ``theta`` from ``q0`` (default: the rest configuration),
-        their residuals and Jacobians. With ``retry``, rows that fail from ``q0`` start again
-        from the straight configuration."""
-        p, d = self.problem, self.data
-        scene = p.apply(jnp.asarray(theta))[0]
+        their residuals and Jacobians; rows that fail from ``q0`` start again from the
+        straight configuration."""
+        scene = self.problem.apply(jnp.asarray(theta))[0]
         q, ok = self._solve(scene, q0)
-        if retry and q0 is not None and not ok.all():
+        if q0 is not None and not ok.all():
             # A warm start next to an equilibrium can stall at round-off (the energy cannot
             # decrease further); those rows start again from the straight configuration (the
             # same batch shape: no recompilation).
             q_retry, ok_retry = self._solve(scene, np.where(ok[:, None], q, 0.0))
             better = ok_retry & ~ok
             q[better], ok = q_retry[better], ok | ok_retry
+        self.count += 1
+        return self._evaluation(theta, q, ok)
+
+    def from_starts(self, theta, starts: np.ndarray) -> list["Evaluation"]:
+        """Every frame's equilibrium at ``theta`` from each of ``starts`` ((k, n)), as one
+        batch (the pool refills its slots across starts); an evaluation per start."""
+        scene = self.problem.apply(jnp.asarray(theta))[0]
+        frames = len(self.data.controls)
+        q0 = np.repeat(np.asarray(starts, float), frames, axis=0)
+        q, ok = self._solve(scene, q0, repeats=len(starts))
+        self.count += 1
+        return [
+            self._evaluation(theta, q[i : i + frames], ok[i : i + frames])
+            for i in range(0, len(q), frames)
+        ]
+
+    def _evaluation(self, theta, q, ok) -> "Evaluation":
+        """Residuals, Jacobians and predictions of the frames at their equilibria ``q``
+        (``ok``: solved)."""
+        p, d = self.problem, self.data
         q_safe = np.where(ok[:, None], q, 0.0)
         rs, js, preds, rpreds, dpreds = [], [], [], [], []
         for start in range(0, len(q), self.chunk):
@@ -557,7 +579,6 @@ class Evaluator:
             preds.append(np.asarray(pred))
             rpreds.append(np.asarray(rpred))
             dpreds.append(np.asarray(dpred))
-        self.count += 1
         valid = ok.copy()
         valid[d.n :] = False
         r = np.concatenate(rs) * valid[:, None]

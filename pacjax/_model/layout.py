@@ -7,6 +7,8 @@ an inextensible segment's ``dL`` are pinned at zero there, and the flat coordina
 the others only.
 """
 
+import functools
+
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
@@ -38,17 +40,27 @@ def split_models(model, n_segments: int) -> tuple[StrainModel, tuple[StrainModel
 
 def free_coordinates(robot: Robot, models, host: StrainModel) -> np.ndarray | None:
     """Positions of the coordinates among the flat ``(segments, host dofs)`` layout, or None
-    when every entry is a coordinate."""
+    when every entry is a coordinate (read-only: shared between calls)."""
+    extensible = tuple(bool(seg.extensible) for seg in robot.segments)
+    return _free_index(tuple(models), extensible, host)
+
+
+@functools.lru_cache(maxsize=256)
+def _free_index(models: tuple, extensible: tuple, host: StrainModel) -> np.ndarray | None:
+    # Cached: every solve asks for the layout several times while checking its inputs, and
+    # the strain models' methods cost tens of microseconds a call (equinox binds each one).
     d = host.dofs_per_segment()
     index = []
-    for i, (seg, model) in enumerate(zip(robot.segments, models, strict=True)):
+    for i, (model, ext) in enumerate(zip(models, extensible, strict=True)):
         own = list(model.embedding(host))
-        if not seg.extensible:
+        if not ext:
             own = own[:-1]
         index += [i * d + k for k in own]
-    if len(index) == robot.n_segments * d:
+    if len(index) == len(models) * d:
         return None
-    return np.asarray(index, np.int64)
+    index = np.asarray(index, np.int64)
+    index.flags.writeable = False
+    return index
 
 
 def rest_coordinates(robot: Robot, models, host: StrainModel, dtype) -> Float[Array, "n d"] | None:

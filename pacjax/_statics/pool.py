@@ -7,6 +7,7 @@ One compiled, ``vmap``-ed call (:func:`_advance`) runs the continuation of every
 own thread (:func:`pool_lanes`); with several devices the pool is sharded along the slots.
 """
 
+import functools
 import queue
 import threading
 
@@ -116,8 +117,15 @@ def pool_slots(chunk: int, n_devices: int) -> int:
 
 def _initial_state(scene, opts, size, dtype, sharding):
     """Placeholder ``(y, state)`` of a pool of ``size`` slots (every slot is reset first)."""
-    n = scene.n_dofs
     solver = make_solver(scene, opts, dtype)
+    return _placeholder(solver, scene.n_dofs, np.dtype(dtype), size, sharding)
+
+
+@functools.lru_cache(maxsize=16)
+def _placeholder(solver, n: int, dtype, size: int, sharding):
+    """The placeholder of :func:`_initial_state`, made once per solver, size and sharding:
+    made op by op it cost more than the rounds of a small batch (the arrays are immutable, so
+    pools can share them)."""
     y = jnp.zeros(n, dtype)
     f_struct = jax.ShapeDtypeStruct((n,), dtype)
     state = solver.init(None, y, None, None, f_struct, None, _TAGS)
