@@ -22,16 +22,17 @@ from .equilibrium import equilibrium_from, make_solver, max_total_steps, start_p
 from .problem import ScaledProblem
 
 #: Continuation steps per round of the slot pool (a finished row waits at most this many
-#: steps for its slot to be refilled): 2 on CPU, 4 on accelerators (see :func:`_steps_per_round`).
-STEPS_PER_ROUND = {"cpu": 2}
+#: steps for its slot to be refilled): 8 on CPU, 4 on accelerators (see :func:`_steps_per_round`).
+STEPS_PER_ROUND = {"cpu": 8}
 _STEPS_PER_ROUND_DEFAULT = 4
 
 
 def _steps_per_round() -> int:
     """Steps per round on the default backend. Fewer steps per round leave a finished slot
-    idle for fewer steps, and a round costs little once the starting points are computed per
-    block of rows (:func:`_start_block`) instead of in every round; on XLA:CPU 2 was the
-    fastest (``benchmarks/RESULTS.md``, "Figures behind the solver's settings").
+    idle for fewer steps; more pay the host's work between rounds (dispatch, refilling the
+    slots) less often, which decides small pools (a fit's batches of 16 frames). On XLA:CPU 8
+    was as fast as 2 on 2,000 rows in a pool of 128 and faster on small pools
+    (``benchmarks/RESULTS.md``, "Figures behind the solver's settings").
     """
     return STEPS_PER_ROUND.get(jax.default_backend(), _STEPS_PER_ROUND_DEFAULT)
 
