@@ -117,26 +117,25 @@ def pool_slots(chunk: int, n_devices: int) -> int:
 
 
 def _initial_state(scene, opts, size, dtype, sharding):
-    """Placeholder ``(y, state)`` of a pool of ``size`` slots (every slot is reset first)."""
+    """Placeholder ``(y, state)`` of a pool of ``size`` slots: zeros of the solver state's
+    shapes. Their values are never read: a slot runs only after :func:`_advance` has reset it
+    to a row's start, and an idle slot's outputs are dropped."""
     solver = make_solver(scene, opts, dtype)
     return _placeholder(solver, scene.n_dofs, np.dtype(dtype), size, sharding)
 
 
 @functools.lru_cache(maxsize=16)
 def _placeholder(solver, n: int, dtype, size: int, sharding):
-    """The placeholder of :func:`_initial_state`, made once per solver, size and sharding:
-    made op by op it cost more than the rounds of a small batch (the arrays are immutable, so
-    pools can share them)."""
-    y = jnp.zeros(n, dtype)
+    # Made from shapes alone, once per solver, size and sharding: ``solver.init`` run op by op
+    # compiled a dozen small programs in every new process and cost more than the rounds of a
+    # small batch (the arrays are immutable, so pools can share them).
     f_struct = jax.ShapeDtypeStruct((n,), dtype)
-    state = solver.init(None, y, None, None, f_struct, None, _TAGS)
-    # Strongly typed, as _advance returns them (a weak type would compile a second version).
-    y, state = jtu.tree_map(
-        lambda x: jnp.asarray(jnp.broadcast_to(x, (size,) + x.shape), x.dtype), (y, state)
+    shapes = jax.eval_shape(
+        lambda y: (y, solver.init(None, y, None, None, f_struct, None, _TAGS)), f_struct
     )
-    if sharding is not None:
-        y, state = jax.device_put((y, state), sharding)
-    return y, state
+    # Strongly typed, as _advance returns them (a weak type would compile a second version).
+    zeros = jtu.tree_map(lambda x: np.zeros((size,) + x.shape, x.dtype), shapes)
+    return jax.device_put(zeros, sharding)
 
 
 class _StartBlocks:
