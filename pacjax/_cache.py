@@ -65,7 +65,7 @@ def cache_directory(root: str | os.PathLike | None = None) -> Path:
 
 
 def enable_compilation_cache(
-    root: str | os.PathLike | None = None, *, min_compile_time_s: float = 0.2
+    root: str | os.PathLike | None = None, *, min_compile_time_s: float = 0.05
 ) -> Path:
     """Keep compiled programs on disk between processes (JAX's persistent compilation cache).
 
@@ -75,8 +75,9 @@ def enable_compilation_cache(
             ``~/.cache/pacjax-jax``.
         min_compile_time_s: programs that compiled faster than this are not written. JAX's
             own default, 1 s, left out pacjax programs of 0.3-1 s (a fit's evaluation, the
-            batch's starting points), compiled again by every new process; below 0.2 s are
-            the single operations run outside a program, a few milliseconds each.
+            batch's starting points, the ring check's 0.1 s), compiled again by every new
+            process; below 0.05 s are the single operations run outside a program (5-25 ms
+            each).
 
     Returns:
         The cache directory.
