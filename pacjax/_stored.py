@@ -47,8 +47,9 @@ import equinox as eqx
 import jax
 import numpy as np
 
-#: Programs that traced and lowered faster than this (s) are kept in memory, not on disk.
-MIN_TRACE_TIME_S = 0.2
+#: Programs that traced and lowered faster than this (s) are kept in memory, not on disk (a
+#: program of 0.1 s, a fit's marker predictions, loads from disk faster than it traces).
+MIN_TRACE_TIME_S = 0.05
 
 #: A printed static value that names a memory address cannot key a program across processes.
 _ADDRESS = re.compile(r" at 0x[0-9a-fA-F]+")

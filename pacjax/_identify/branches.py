@@ -74,7 +74,7 @@ class BranchTracker:
         starts per check (0: no checks, jump detection only)."""
         self.markers = markers
         self.noise = float(noise)
-        self.floor = JUMP_FLOOR * float(scene.robot.total_length)
+        self.floor = JUMP_FLOOR * sum(float(seg.length) for seg in scene.robot.segments)
         self.starts = (
             random_starts(scene, starts, seed, SPREAD, False) if starts else np.zeros((0,))
         )

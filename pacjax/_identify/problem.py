@@ -172,9 +172,9 @@ def _put_material(scene: Scene, name: str, idx, value) -> Scene:
     return eqx.tree_at(lambda s: s.robot.segments, scene, tuple(segments))
 
 
-def _frame_residual(problem: Problem, theta, q, controls, row, meas, mask, rmeas, rmask):
-    """Scaled residuals of one frame (robust weights applied), marker predictions (mocap
-    frame) and rotations at the sites."""
+def _frame_markers(problem: Problem, theta, q, row):
+    """Marker predictions (mocap frame) of one frame, the site rotations (world) and the mocap
+    frame's rotation."""
     scene, rot, trans, offsets = problem.apply(theta)
     if row is not None:
         scene = problem.frame_loads(scene, row)
@@ -182,7 +182,13 @@ def _frame_residual(problem: Problem, theta, q, controls, row, meas, mask, rmeas
         q, np.asarray(problem.site_segment), jnp.asarray(problem.site_s, q.dtype)
     )
     world = frames_pos + matvec3(frames_rot, offsets)
-    pred = jnp.matmul(world, rot.T, precision=MATMUL_PRECISION) + trans
+    return jnp.matmul(world, rot.T, precision=MATMUL_PRECISION) + trans, frames_rot, rot
+
+
+def _frame_residual(problem: Problem, theta, q, controls, row, meas, mask, rmeas, rmask):
+    """Scaled residuals of one frame (robust weights applied), marker predictions (mocap
+    frame) and rotations at the sites."""
+    pred, frames_rot, rot = _frame_markers(problem, theta, q, row)
     d = (pred - meas) / problem.noise * mask[:, None]
     # Huber weights on each marker's distance (the quadratic loss is the threshold at
     # L2_DELTA: one compiled residual serves both losses).
@@ -234,6 +240,15 @@ def _evaluate(problem, theta, q, controls, rows, meas, mask, rmeas, rmask):
     axes += (0 if rmeas is not None else None, 0 if rmask is not None else None)
     return jax.vmap(_frame_jacobian, in_axes=axes)(
         problem, theta, q, controls, rows, meas, mask, rmeas, rmask
+    )
+
+
+@jit
+def _markers(problem, theta, q, rows):
+    """Marker predictions of many frames at their equilibria ``q`` (no derivatives)."""
+    axes = (0, 0 if rows is not None else None)
+    return jax.vmap(lambda q_, row: _frame_markers(problem, theta, q_, row)[0], in_axes=axes)(
+        q, rows
     )
 
 
@@ -536,18 +551,32 @@ class Evaluator:
         self.count += 1
         return self._evaluation(theta, q, ok)
 
-    def from_starts(self, theta, starts: np.ndarray) -> list["Evaluation"]:
+    def from_starts(self, theta, starts: np.ndarray) -> list["Solutions"]:
         """Every frame's equilibrium at ``theta`` from each of ``starts`` ((k, n)), as one
-        batch (the pool refills its slots across starts); an evaluation per start."""
+        batch (the pool refills its slots across starts), and its markers; one
+        :class:`Solutions` per start."""
         scene = self.problem.apply(jnp.asarray(theta))[0]
         frames = len(self.data.controls)
         q0 = np.repeat(np.asarray(starts, float), frames, axis=0)
         q, ok = self._solve(scene, q0, repeats=len(starts))
         self.count += 1
-        return [
-            self._evaluation(theta, q[i : i + frames], ok[i : i + frames])
-            for i in range(0, len(q), frames)
-        ]
+        d = self.data
+        rows = (
+            None
+            if d.rows is None
+            else jax.tree.map(lambda v: np.concatenate([v] * len(starts)), d.rows)
+        )
+        pred = np.asarray(
+            _markers(
+                self.problem, jnp.asarray(theta), jnp.asarray(np.where(ok[:, None], q, 0.0)), rows
+            )
+        )
+        out = []
+        for i in range(0, len(q), frames):
+            valid = ok[i : i + frames].copy()
+            valid[d.n :] = False
+            out.append(Solutions(q[i : i + frames], pred[i : i + frames][: d.n], valid))
+        return out
 
     def _evaluation(self, theta, q, ok) -> "Evaluation":
         """Residuals, Jacobians and predictions of the frames at their equilibria ``q``
@@ -623,6 +652,15 @@ class Prior:
     def __call__(self, theta) -> tuple[np.ndarray, np.ndarray]:
         jac, r = self._rows(jnp.asarray(theta))
         return np.asarray(r), np.asarray(jac)
+
+
+@dataclasses.dataclass
+class Solutions:
+    """The frames' equilibria from one start: no residuals or derivatives."""
+
+    q: np.ndarray  # (rows, n) padded rows included
+    pred: np.ndarray  # (frames, m, 3) marker predictions, mocap frame
+    valid: np.ndarray  # (rows,) converged and stable (padded rows False)
 
 
 @dataclasses.dataclass

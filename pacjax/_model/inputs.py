@@ -111,10 +111,14 @@ def check_start_contraction(scene: Scene, qs: np.ndarray) -> None:
     if any(x is None for x in known):
         return
     limits = np.asarray(known, float)
-    # Evaluated now even inside a jit trace (a known q0 closed over by a jitted function).
-    with jax.ensure_compile_time_eval():
-        coords = jax.vmap(scene.coordinates)(jnp.asarray(qs))
-        elongation = np.asarray(jax.vmap(jax.vmap(scene.model.elongation))(coords))
+    # In NumPy: the values are known (also inside a jit trace, a q0 closed over by a jitted
+    # function), and JAX run op by op compiled each operation in every new process.
+    free = scene.free_coordinates()
+    shape = (scene.n_segments, scene.dofs_per_segment)
+    full = np.zeros((qs.shape[0], shape[0] * shape[1]))
+    full[:, slice(None) if free is None else free] = qs
+    coords = full.reshape(qs.shape[0], *shape)
+    elongation = np.array([[scene.model.elongation(c) for c in row] for row in coords])
     past = -elongation >= limits[None]
     if np.any(past):
         row, seg = np.argwhere(past)[0]
