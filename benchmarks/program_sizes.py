@@ -22,7 +22,7 @@ import jax
 import numpy as np
 
 import pacjax as pj
-from pacjax._identify import problem as identify_problem
+from pacjax._identify import evaluation as identify_evaluation
 from pacjax._inverse import inverse as inverse_module
 from pacjax._statics import equilibrium, pool
 
@@ -81,7 +81,7 @@ def main(out_path: str | None = None) -> dict:
     capture(equilibrium, "_solve_checked", captured)
     capture(pool, "_advance", captured)
     capture(pool, "_start_block", captured)
-    capture(identify_problem, "_evaluate", captured, stop=True)
+    capture(identify_evaluation, "_evaluate", captured, stop=True)
     capture(inverse_module, "solve_one", captured, stop=True)
 
     scene = pj.presets.stella2023(pj.PAC(), tip_mass=0.2)

@@ -15,8 +15,8 @@ import numpy as np
 
 from .._results import RESULTS
 from .branches import Branches, BranchTracker
+from .evaluation import Evaluator
 from .optimise import History, optimise
-from .problem import Evaluator
 
 #: Descents after which frames still moving to better-fitting branches end a fit.
 MAX_ROUNDS = 4

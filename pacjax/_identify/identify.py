@@ -40,10 +40,9 @@ from .._statics.options import SolverOptions, resolve_options
 from .dataset import MocapDataset
 from .descent import Descent, DescentSettings, descend, run_summary, starting_points
 from .estimates import covariance, parameter_table
+from .evaluation import Evaluator, FrameData
 from .problem import (
     L2_DELTA,
-    Evaluator,
-    FrameData,
     Prior,
     Problem,
     check_params,
