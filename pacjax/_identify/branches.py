@@ -74,6 +74,8 @@ class BranchTracker:
         starts per check (0: no checks, jump detection only)."""
         self.markers = markers
         self.noise = float(noise)
+        # The robot's length summed on the host: `Robot.total_length` adds JAX scalars, one
+        # more small compilation in every new process.
         self.floor = JUMP_FLOOR * sum(float(seg.length) for seg in scene.robot.segments)
         self.starts = (
             random_starts(scene, starts, seed, SPREAD, False) if starts else np.zeros((0,))
