@@ -46,7 +46,7 @@ from .continuation import conservative_part, retry_failed
 from .implicit import implicit_equilibrium
 from .options import SolverOptions, resolve_options
 from .problem import ScaledProblem, flow_field
-from .ptc import PseudoTransientContinuation, final_code, max_abs, smallest_eigenvalue
+from .ptc import PseudoTransientContinuation, final_code, max_abs
 from .ringcheck import check_rows, warn_sparse_rings
 from .solution import Equilibrium
 
@@ -111,8 +111,7 @@ def equilibrium_from(
     """The :class:`Equilibrium` at the continuation's final iterate ``y`` and state."""
     residual_norm = max_abs(state.residual)
     converged = residual_norm <= tol
-    eig = smallest_eigenvalue(state)
-    stable = eig > -solver.stability_tol
+    stable = state.eig > -solver.stability_tol
     energy = state.merit if scene.is_conservative else jnp.asarray(jnp.nan, state.merit.dtype)
     # A stationary point that is not a minimum is not a success: a user who reads only the
     # result must not take a physically impossible shape.
@@ -122,7 +121,7 @@ def equilibrium_from(
         converged=converged,
         residual_norm=residual_norm,
         stable=stable,
-        min_hessian_eigenvalue=eig,
+        min_hessian_eigenvalue=state.eig,
         steps=steps,
         result=from_code(code),
         energy=energy,

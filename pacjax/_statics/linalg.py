@@ -115,37 +115,3 @@ eigh = _grouped(_one_matrix_per_call(jnp.linalg.eigh))
 
 #: ``jnp.linalg.solve(a, b)`` of one system (``a`` (..., n, n)); see the module docstring.
 solve = _grouped(_one_matrix_per_call(jnp.linalg.solve))
-
-#: ``jnp.linalg.cholesky`` of one symmetric matrix; see the module docstring.
-cholesky = _grouped(_one_matrix_per_call(jnp.linalg.cholesky))
-
-
-def _modes(a):
-    eigvals, eigvecs = eigh(a)
-    return eigvals, eigvecs
-
-
-def _placeholder_modes(a):
-    n = a.shape[-1]
-    return jnp.ones(a.shape[:-1], a.dtype), jnp.broadcast_to(jnp.eye(n, dtype=a.dtype), a.shape)
-
-
-@jax.custom_batching.custom_vmap
-def eigh_where_needed(a, needed):
-    """``eigh(a)`` where ``needed``, else placeholders (eigenvalues 1, the identity).
-
-    Under ``vmap`` the decomposition is one branch of a ``lax.cond`` on whether any row needs
-    it, so a batch in which no row does skips it (a ``vmap`` of a plain ``cond`` would run
-    both branches for every row); rows that do not need it then get the decomposition too.
-    """
-    return jax.lax.cond(needed, _modes, _placeholder_modes, a)
-
-
-@eigh_where_needed.def_vmap
-def _eigh_where_needed_rule(axis_size, in_batched, a, needed):
-    a_batched, needed_batched = in_batched
-    if not a_batched:
-        a = jnp.broadcast_to(a, (axis_size,) + a.shape)
-    any_needed = jnp.any(needed) if needed_batched else needed
-    out = jax.lax.cond(any_needed, jax.vmap(_modes), jax.vmap(_placeholder_modes), a)
-    return out, (True, True)

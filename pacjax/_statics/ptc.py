@@ -52,13 +52,7 @@ class PTCState(eqx.Module):
     # Set by an escape, cleared once the stiffness is no longer indefinite: until then a small
     # residual is not convergence (see ``terminate``).
     escaping: Bool[Array, ""]
-    # Smallest eigenvalue of the scaled stiffness (:func:`stiffness_modes`), and its modes;
-    # placeholders where ``definite`` (see :func:`smallest_eigenvalue`).
     eig: Float[Array, ""]
-    # The scaled stiffness is positive definite beyond ``stability_tol`` (a Cholesky factor
-    # says so): the continuation step is a linear solve, and its eigen-decomposition, which
-    # only a step along an indefinite stiffness needs, is skipped.
-    definite: Bool[Array, ""]
     eigvals: Float[Array, " n"]
     eigvecs: Float[Array, "n n"]
     escape_dy: Float[Array, " n"]
@@ -79,30 +73,16 @@ def max_abs(x):
     return jnp.max(jnp.abs(x))
 
 
-def scaled_stiffness(jac, weights):
-    """``K = diag(w) J diag(1/w)`` symmetrised. With ``w = sqrt(d) sigma`` it is
-    ``D^-1/2 (dF/dq) D^-1/2``: the stiffness relative to the elastic stiffness, whose eigenvalue
-    signs are those of the Hessian."""
-    k = (weights[:, None] * jac) / weights[None, :]
-    return 0.5 * (k + k.T)
+def stiffness_modes(jac, weights, size, tol):
+    """Eigen-decomposition of ``K = diag(w) J diag(1/w)`` symmetrised, and an escape step.
 
-
-def is_definite(k, tol) -> Bool[Array, ""]:
-    """Whether the symmetric ``k``'s smallest eigenvalue is above ``tol``: the Cholesky
-    factorisation of ``k - tol I`` succeeds (it is NaN where it fails)."""
-    shifted = k - tol * jnp.eye(k.shape[0], dtype=k.dtype)
-    return jnp.all(jnp.isfinite(_linalg.cholesky(shifted)))
-
-
-def stiffness_modes(k, weights, size, tol, needed=True):
-    """Eigen-decomposition of the scaled stiffness ``k`` (:func:`scaled_stiffness`) where
-    ``needed`` (placeholders elsewhere, :func:`pacjax._statics.linalg.eigh_where_needed`), and
-    an escape step.
-
-    The escape step (in ``y``) follows every direction of negative curvature at once, so a saddle
+    With ``w = sqrt(d) sigma`` the matrix ``K`` is ``D^-1/2 (dF/dq) D^-1/2``: the stiffness
+    relative to the elastic stiffness, whose eigenvalue signs are those of the Hessian. The
+    escape step (in ``y``) follows every direction of negative curvature at once, so a saddle
     with several unstable modes (one per segment of a robot) is left in one go.
     """
-    eigvals, eigvecs = _linalg.eigh_where_needed(k, needed)
+    k = (weights[:, None] * jac) / weights[None, :]
+    eigvals, eigvecs = _linalg.eigh(0.5 * (k + k.T))
     unstable = (eigvals < -tol).at[0].set(True)
     dy = (jnp.matmul(eigvecs, jnp.where(unstable, 1.0, 0.0), precision=MATMUL_PRECISION)) / weights
     dy = size * dy / jnp.maximum(max_abs(dy), jnp.finfo(dy.dtype).tiny)
@@ -124,27 +104,12 @@ def _saddle_free_step(state: PTCState) -> Float[Array, " n"]:
     """The continuation step of a conservative scene, from the stiffness modes of ``state``.
 
     ``K`` is the scaled Hessian. Continuation step with ``|lambda|`` ("saddle-free" Newton): full
-    Newton along stable modes, descent along the others; ``1 / dt`` shifts every mode. Where
-    ``K`` is positive definite that is ``(K + I / dt)^-1`` applied to the weighted residual, a
-    linear solve instead of the eigen-decomposition.
+    Newton along stable modes, descent along the others; ``1 / dt`` shifts every mode.
     """
     w = state.weights
-    rhs = w * state.residual
-    rz = jnp.matmul(state.eigvecs.T, rhs, precision=MATMUL_PRECISION)
+    rz = jnp.matmul(state.eigvecs.T, w * state.residual, precision=MATMUL_PRECISION)
     gain = 1.0 / (jnp.abs(state.eigvals) + 1.0 / state.dt)
-    modal = jnp.matmul(state.eigvecs, gain * rz, precision=MATMUL_PRECISION)
-    k = scaled_stiffness(state.jacobian, w)
-    shifted = k + jnp.eye(k.shape[0], dtype=k.dtype) / state.dt
-    solved = _linalg.solve(shifted, rhs[:, None])[:, 0]
-    return -jnp.where(state.definite, solved, modal) / w
-
-
-def smallest_eigenvalue(state: PTCState) -> Float[Array, ""]:
-    """The smallest eigenvalue of the scaled stiffness at the state's point: ``state.eig``,
-    computed here where the continuation skipped the decomposition (``state.definite``)."""
-    k = scaled_stiffness(state.jacobian, state.weights)
-    eigvals, _ = _linalg.eigh_where_needed(k, state.definite)
-    return jnp.where(state.definite, eigvals[0], state.eig)
+    return -(jnp.matmul(state.eigvecs, gain * rz, precision=MATMUL_PRECISION)) / w
 
 
 def _shorter(alpha, merit, merit0, slope):
@@ -217,7 +182,6 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
             escapes=jnp.asarray(0),
             escaping=jnp.asarray(False),
             eig=jnp.asarray(0.0, dtype),
-            definite=jnp.asarray(False),
             eigvals=jnp.ones(n, dtype),
             eigvecs=jnp.eye(n, dtype=dtype),
             escape_dy=jnp.zeros(n, dtype),
@@ -231,7 +195,6 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
     def _wants_escape(self, state: PTCState) -> Bool[Array, ""]:
         return (
             self._converged(state.residual)
-            & ~state.definite
             & (state.eig < -self.stability_tol)
             & (state.escapes < self.escapes)
         )
@@ -254,18 +217,13 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
         accept = ok | tiny_dt
         alpha = jnp.where(ok, alpha, _MIN_ALPHA)
         new = self._linearise(fn, _moved(args, y, alpha * delta), args, state)
-        # Under vmap the rows that have already terminated take this step too, and their
-        # result is dropped: they need no eigen-decomposition.
-        finished, _ = self.terminate(fn, y, args, None, state, None)
         finite = (
             jnp.all(jnp.isfinite(new.residual))
             & jnp.isfinite(new.merit)
             & jnp.all(jnp.isfinite(new.jacobian))
         )
         accept = first | (accept & finite)
-        new_state = self._control(
-            state, new, alpha, ok, tiny_dt, accept, finite, first, escape, finished
-        )
+        new_state = self._control(state, new, alpha, ok, tiny_dt, accept, finite, first, escape)
         return jnp.where(accept, new.y, y), new_state, (new_state.merit, new_state.weights)
 
     def _descent(self, fn, y, args, state: PTCState, first, escape):
@@ -426,31 +384,23 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
         drive = args.drive(y) if self._frozen else state.drive
         return _Point(y, r, merit, jac, weights, drive)
 
-    def _control(
-        self, state, new: _Point, alpha, ok, tiny_dt, accept, finite, first, escape, finished
-    ):
+    def _control(self, state, new: _Point, alpha, ok, tiny_dt, accept, finite, first, escape):
         """The state after the step: the point ``new`` where ``accept``, else that of ``state``.
 
         Also the next pseudo-time step (:meth:`_next_dt`), the stiffness modes and escape step
-        for the next direction (:func:`stiffness_modes`; for a conservative scene only where
-        the stiffness is not positive definite, and not for a row that had ``finished``), the
-        escape bookkeeping and the result code (``NONFINITE`` at a non-finite start,
-        ``STALLED``).
+        for the next direction (:func:`stiffness_modes`), the escape bookkeeping and the result
+        code (``NONFINITE`` at a non-finite start, ``STALLED``).
         """
 
         def keep(a, b):
             return jnp.where(accept, a, b)
 
         jac = keep(new.jacobian, state.jacobian)
-        k = scaled_stiffness(jac, new.weights)
-        # The non-conservative step shifts by the smallest eigenvalue: always decomposed.
-        definite = is_definite(k, self.stability_tol) if self.symmetric else jnp.asarray(False)
         eigvals, eigvecs, escape_dy = stiffness_modes(
-            k, new.weights, self.escape_size, self.stability_tol, ~definite & ~finished
+            jac, new.weights, self.escape_size, self.stability_tol
         )
         eig = eigvals[0]
-        positive = definite | (eig > self.stability_tol)
-        dt = self._next_dt(state, new.residual, alpha, accept, first, escape, positive)
+        dt = self._next_dt(state, new.residual, alpha, accept, first, escape, eig)
         code = jnp.where(first & ~finite, NONFINITE, state.code)
         # Stalled: even at the smallest pseudo-time step no step of any length lowers the merit
         # (the flow direction is not a descent direction of |r|^2 where the Jacobian of a
@@ -473,11 +423,8 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
             # continuation may return to the same point, an attractor of the flow whose
             # symmetric stiffness is indefinite. There the flag lasts one step (no termination
             # on the escaped iterate itself); it used to hold such a row to the step limit.
-            escaping=(escape | (state.escaping & self.symmetric))
-            & ~definite
-            & (eig < -self.stability_tol),
+            escaping=(escape | (state.escaping & self.symmetric)) & (eig < -self.stability_tol),
             eig=eig,
-            definite=definite,
             eigvals=eigvals,
             eigvecs=eigvecs,
             escape_dy=escape_dy,
@@ -485,15 +432,15 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
             code=code,
         )
 
-    def _next_dt(self, state: PTCState, r_new, alpha, accept, first, escape, positive):
+    def _next_dt(self, state: PTCState, r_new, alpha, accept, first, escape, eig):
         """The pseudo-time step for the next iteration (switched evolution relaxation).
 
         After an accepted full step ``dt`` grows by the fall of the residual (within
         ``_DT_GROWTH``, up to ``max_dt``); after an accepted shortened step it stays; after a
         rejected one it shrinks tenfold; on an escape it restarts at ``initial_dt``, and on the
-        first step too, unless ``newton_start`` holds and the stiffness there is ``positive``
-        (definite beyond ``stability_tol``): then ``max_dt`` (Newton), until a step is shortened
-        or rejected, when it restarts at ``initial_dt``.
+        first step too, unless ``newton_start`` holds and the stiffness ``eig`` there is
+        positive: then ``max_dt`` (Newton), until a step is shortened or rejected, when it
+        restarts at ``initial_dt``.
         """
         dtype = state.dt.dtype
         ratio = max_abs(state.residual) / jnp.maximum(max_abs(r_new), jnp.finfo(dtype).tiny)
@@ -501,7 +448,7 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
         grown = jnp.minimum(state.dt * jnp.clip(ratio, *_DT_GROWTH), self.max_dt)
         start, newton_ended = self.initial_dt, jnp.asarray(False)
         if self.newton_start and self.symmetric:
-            start = jnp.where(positive, self.max_dt, self.initial_dt)
+            start = jnp.where(eig > self.stability_tol, self.max_dt, self.initial_dt)
             newton_ended = (state.dt >= self.max_dt) & ~full
         return jnp.where(
             first,
