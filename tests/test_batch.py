@@ -127,3 +127,31 @@ def test_batch_under_a_trace_says_to_vmap_the_single_solve():
     scene = pj.presets.tentacle()
     with pytest.raises(TypeError, match=r"jax.vmap\(pj.solve_equilibrium\)"):
         jax.grad(lambda u: jnp.sum(pj.solve_batch(scene, u).q))(jnp.ones((2, 2)))
+
+
+def test_only_the_first_pool_of_a_kind_runs_an_idle_round(scene, monkeypatch):
+    # The idle round (no slot active) compiles the pool's round in the background; once a
+    # round of the same kind has run in this process it is compiled, and the round is skipped.
+    # A pool of another kind (another size) runs its own.
+    from pacjax._statics import pool
+
+    idle = []
+    round_ = pool._round
+
+    def spy(*args):
+        active = args[11]
+        idle.append(not np.any(active))
+        return round_(*args)
+
+    monkeypatch.setattr(pool, "_round", spy)
+    monkeypatch.setattr(pool, "_ROUNDS_RUN", type(pool._ROUNDS_RUN)())
+    commands = np.random.default_rng(5).uniform(0.0, 0.01, (6, 3))
+    first = pj.solve_batch(scene, commands)
+    assert sum(idle) == 1
+    idle.clear()
+    second = pj.solve_batch(scene, commands)
+    assert sum(idle) == 0 and len(idle) > 0
+    np.testing.assert_array_equal(first.q, second.q)
+    idle.clear()
+    pj.solve_batch(scene, commands[:3])
+    assert sum(idle) == 1
