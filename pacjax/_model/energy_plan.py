@@ -101,7 +101,7 @@ class EnergyPlan:
         if self.routing is not None:
             ids = np.arange(self.guide_ids.start, self.guide_ids.stop)
             knot = self.knots.flat_index[ids] % self.knots.width
-            self.chords = LocalChords.build(self.routing, knot, self.knots.width, scene.n_segments)
+            self.chords = LocalChords.build(self.routing, knot, scene.n_segments)
             if self.chords is None:
                 world += ids.tolist()
         self.world_points = sorted(set(world))

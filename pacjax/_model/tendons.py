@@ -293,7 +293,7 @@ class LocalChords:
         self.point_a, self.point_b, self.mask, self.tendon = point_a, point_b, mask, tendon
 
     @classmethod
-    def build(cls, routing: TendonRouting, knot: np.ndarray, width: int, n_segments: int):
+    def build(cls, routing: TendonRouting, knot: np.ndarray, n_segments: int):
         """``knot``: each routing point's knot index within its segment."""
         owned: list[list[tuple]] = [[] for _ in range(n_segments)]
         for c, a in enumerate(routing.chord_start.tolist()):

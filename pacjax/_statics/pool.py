@@ -358,6 +358,25 @@ def _round(scene, opts, update, dtype, sharding, u_pool, p_pool, y, state, reset
 #: same kind needs no idle round to compile it.
 _ROUNDS_RUN: collections.OrderedDict = collections.OrderedDict()
 _ROUNDS_RUN_MAX = 256
+# Pools of several threads (the lanes, and the user's) look keys up and add them.
+_ROUNDS_LOCK = threading.Lock()
+
+
+def _round_has_run(key) -> bool:
+    with _ROUNDS_LOCK:
+        if key is None or key not in _ROUNDS_RUN:
+            return False
+        _ROUNDS_RUN.move_to_end(key)
+        return True
+
+
+def _round_ran(key) -> None:
+    if key is None:
+        return
+    with _ROUNDS_LOCK:
+        _ROUNDS_RUN[key] = None
+        while len(_ROUNDS_RUN) > _ROUNDS_RUN_MAX:
+            _ROUNDS_RUN.popitem(last=False)
 
 
 def _leaf_key(x):
@@ -406,8 +425,7 @@ class _RoundCompile(threading.Thread):
         scene, controls, params, update, opts, size, dtype, sharding = self.args
         try:
             key = _round_key(*self.args)
-            if key is not None and key in _ROUNDS_RUN:
-                _ROUNDS_RUN.move_to_end(key)
+            if _round_has_run(key):
                 return
             u_pool, p_pool, y_pool = _empty_pool(scene, controls, params, size)
             y, state = _initial_state(scene, opts, size, dtype, sharding)
@@ -416,10 +434,7 @@ class _RoundCompile(threading.Thread):
                 scene, opts, update, dtype, sharding, u_pool, p_pool, y, state, idle, y_pool, idle
             )
             jax.block_until_ready(out)
-            if key is not None:
-                _ROUNDS_RUN[key] = None
-                while len(_ROUNDS_RUN) > _ROUNDS_RUN_MAX:
-                    _ROUNDS_RUN.popitem(last=False)
+            _round_ran(key)
         except BaseException as error:  # raised again in the pools' threads
             self.error = error
 
