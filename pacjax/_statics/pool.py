@@ -413,8 +413,8 @@ class _RoundCompile(threading.Thread):
     """Compiles the pool's round in the background (a round with no slot active), while the
     first block of starting points is traced, compiled and computed: the two compilations
     overlap. The pools wait for it (:meth:`wait`), which raises what it raised. A round of the
-    same kind already run in this process is compiled: then the idle round, about a tenth of a
-    warm batch of 16 rows, is not run."""
+    same kind already run in this process is compiled: then the idle round is not run (what it
+    cost a warm batch of a few rows is in ``benchmarks/RESULTS.md``, "Chord ends by index")."""
 
     def __init__(self, scene, controls, params, update, opts, size, dtype, sharding):
         super().__init__(daemon=True)
