@@ -86,3 +86,20 @@ def test_options_object_and_overrides_reach_the_solver():
     )
     batch = pj.solve_batch(SCENE, np.stack([U, 2 * U]), options=loose, tol=1e-12)
     assert np.all(np.asarray(batch.residual_norm) <= 1e-12)
+
+
+def test_the_first_pseudo_time_step_defaults_per_coordinates():
+    from pacjax._statics.equilibrium import make_solver
+    from pacjax._statics.options import POLAR_INITIAL_DT, resolve_options
+
+    options = resolve_options(dtype=np.float64)
+    assert options.initial_dt is None
+    for model, expected in [
+        (pj.PAC(), POLAR_INITIAL_DT),
+        (pj.PCC(), POLAR_INITIAL_DT),
+        (pj.PolynomialCurvature(1), 1.0),
+    ]:
+        scene = pj.presets.stella2023(model, n_sections=1)
+        assert make_solver(scene, options, np.float64).initial_dt == expected
+        given = resolve_options(options, initial_dt=5.0)
+        assert make_solver(scene, given, np.float64).initial_dt == 5.0

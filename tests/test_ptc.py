@@ -158,3 +158,19 @@ def test_tentacle_in_strain_coordinates_converges_in_newtons_steps():
     # Plain Newton from straight took 4 iterations on such rows (the first step of the count
     # is the linearisation at the start); the continuation from dt = 1 took 7 steps.
     assert int(np.max(eq.steps)) <= 6, np.asarray(eq.steps)
+
+
+def test_pac_tentacle_takes_newtons_steps_from_a_long_first_step():
+    # PCC/PAC start the continuation at dt = 1e3 (pacjax._statics.options.POLAR_INITIAL_DT):
+    # long enough for near-Newton steps along the bending, short enough to hold the plane
+    # angles, whose stiffness at the aligned start is the regulariser's. From dt = 1 the hanging
+    # tentacle crept up its soft modes for two more steps.
+    scene = pj.presets.tentacle(pj.PAC())
+    tensions = np.random.default_rng(1).uniform(0.0, 8.0, (8, 2))
+    eq = pj.solve_batch(scene, tensions)
+    short = pj.solve_batch(scene, tensions, options=pj.SolverOptions(initial_dt=1.0))
+    for result in (eq, short):
+        assert np.all(np.asarray(result.converged)) and np.all(np.asarray(result.stable))
+    np.testing.assert_allclose(np.asarray(eq.q), np.asarray(short.q), atol=1e-8)
+    assert int(np.max(eq.steps)) <= 6, np.asarray(eq.steps)
+    assert int(np.min(short.steps)) >= 7, np.asarray(short.steps)

@@ -44,7 +44,7 @@ from .._model.scene import Scene
 from .._results import CONVERGED_SADDLE, from_code
 from .continuation import conservative_part, retry_failed
 from .implicit import implicit_equilibrium
-from .options import SolverOptions, resolve_options
+from .options import SolverOptions, initial_dt, resolve_options
 from .problem import ScaledProblem, flow_field
 from .ptc import PseudoTransientContinuation, final_code, max_abs
 from .ringcheck import check_rows, warn_sparse_rings
@@ -81,7 +81,7 @@ def make_solver(scene: Scene, opts: SolverOptions, dtype) -> PseudoTransientCont
     return PseudoTransientContinuation(
         rtol=0.0,
         atol=opts.tol,
-        initial_dt=opts.initial_dt,
+        initial_dt=initial_dt(opts, scene.model.newton_from_start()),
         max_dt=opts.max_dt,
         escapes=opts.escapes,
         escape_size=opts.escape_size,

@@ -13,6 +13,20 @@ from .._chord import kvaerno5
 #: their step limit at residuals of 1e-5 to 1e-9 (``tests/test_campaign.py``).
 DEFAULT_TOL = {"float64": 1e-10, "float32": 1e-4}
 
+#: Default first pseudo-time step of PCC/PAC (polar coordinates, no Newton start). At the
+#: aligned start a plane angle's stiffness is only its regulariser's (1e-6 of the elastic
+#: scale), and ``1 / dt`` is what holds it while the segments bend; 1e3 holds it and leaves the
+#: other modes close to Newton steps. From 1, a soft robot hanging under gravity crept up its
+#: stiffness for two more steps (``benchmarks/RESULTS.md``, "A first step as long as Newton's").
+POLAR_INITIAL_DT = 1e3
+
+
+def initial_dt(options: "SolverOptions", newton_start: bool) -> float:
+    """``options.initial_dt``, or its default for a model with or without a Newton start."""
+    if options.initial_dt is not None:
+        return options.initial_dt
+    return 1.0 if newton_start else POLAR_INITIAL_DT
+
 
 class SolverOptions(eqx.Module):
     """Settings of the equilibrium solver, taken by every solve: :func:`pacjax.solve_equilibrium`,
@@ -26,10 +40,11 @@ class SolverOptions(eqx.Module):
         tol: tolerance on the scaled residual (see :class:`pacjax.Equilibrium`); default None:
             1e-10 in float64, 1e-4 in float32 (:data:`DEFAULT_TOL`).
         max_steps: maximum continuation steps per escape attempt; default 100.
-        initial_dt: first pseudo-time step, in units of the elastic relaxation time; default 1.
-            With strain coordinates (``PolynomialCurvature``) a conservative solve whose
-            stiffness at the start is positive definite first takes Newton steps, and starts
-            the continuation from ``initial_dt`` at the first step that is shortened or rejected
+        initial_dt: first pseudo-time step, in units of the elastic relaxation time; default
+            None: :data:`POLAR_INITIAL_DT` for PCC/PAC, 1 for strain coordinates. With strain
+            coordinates (``PolynomialCurvature``) a conservative solve whose stiffness at the
+            start is positive definite first takes Newton steps, and starts the continuation
+            from ``initial_dt`` at the first step that is shortened or rejected
             (:meth:`pacjax.StrainModel.newton_from_start`).
         max_dt: largest pseudo-time step (Newton beyond it); default 1e12.
         escapes: how many times a converged saddle is left along its negative-curvature
@@ -49,7 +64,7 @@ class SolverOptions(eqx.Module):
 
     tol: float | None = eqx.field(static=True, default=None)
     max_steps: int = eqx.field(static=True, default=100)
-    initial_dt: float = eqx.field(static=True, default=1.0)
+    initial_dt: float | None = eqx.field(static=True, default=None)
     max_dt: float = eqx.field(static=True, default=1e12)
     escapes: int = eqx.field(static=True, default=2)
     escape_size: float = eqx.field(static=True, default=0.05)
@@ -69,7 +84,7 @@ class SolverOptions(eqx.Module):
                 raise TypeError(f"{name} must be an integer, got {value!r}")
         for name in ("tol", "initial_dt", "max_dt", "escape_size", "stability_tol"):
             value = getattr(self, name)
-            if value is None and name in ("tol", "stability_tol"):
+            if value is None and name in ("tol", "initial_dt", "stability_tol"):
                 continue
             if isinstance(value, bool) or not isinstance(value, (int, float, np.floating)):
                 raise TypeError(f"{name} must be a number, got {value!r}")

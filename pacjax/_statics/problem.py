@@ -10,6 +10,13 @@ from .._config import MATMUL_PRECISION
 from .._model.hessian import dead_followers, energy_derivatives, follower_jacobian
 from .._model.scene import Scene, SceneConstants
 
+#: Smallest end angle (rad) of a segment whose Newton model follows the moves
+#: (:meth:`ScaledProblem.move_curvature`): the plane angle's regulariser (1e-6 of the elastic
+#: scale) divided by it stays 1e-3 of that scale.
+_MOVE_CURVATURE_THETA = 1e-3
+#: Scaled residual below which the solver's Jacobian is the energy's Hessian again.
+_MOVE_CURVATURE_RESIDUAL = 1e-3
+
 
 class ScaledProblem(eqx.Module):
     """The equilibrium problem in scaled coordinates ``y = q / sigma``.
@@ -84,7 +91,8 @@ class ScaledProblem(eqx.Module):
         :meth:`residual_and_merit`'s).
         Other non-conservative scenes add the forward derivative of their non-conservative
         loads alone (a few points of the kinematics), not of the whole residual, which is
-        cheaper."""
+        cheaper. A conservative scene's Hessian is that of the energy along the continuation's
+        moves (:meth:`move_curvature`)."""
         q = self.q(y)
         if self.dead_scene is not None:
             hessian = follower_jacobian(
@@ -95,7 +103,12 @@ class ScaledProblem(eqx.Module):
             return jac, (r, (energy, self.weights()))
         energy, grad, hessian = energy_derivatives(self.scene, q, self.controls, self.consts)
         merit = energy
-        if not self.scene.is_conservative:
+        if self.scene.is_conservative:
+            # Near a solution Newton's steps converge with either model, and the solver's
+            # last Jacobian is the energy's (for the derivatives and the stability check).
+            far = jnp.max(jnp.abs(grad * self.row)) > _MOVE_CURVATURE_RESIDUAL
+            hessian = hessian + jnp.where(far, self.move_curvature(q, grad), 0.0)
+        else:
 
             def forces(x):
                 value = self.scene.nonconservative_forces(x)
@@ -141,6 +154,51 @@ class ScaledProblem(eqx.Module):
         turn = jnp.where(flat, dphi, turn)
         q_new = (q + dq).at[:, :k].set(c_new).at[:, k].set(q[:, k] + turn)
         return self.scene.free_part(q_new) / self.sigma
+
+    def move_curvature(self, q, grad):
+        """``sum_i grad_i d2 m_i / d dq2`` at ``dq = 0``, ``m(dq)`` the coordinates that
+        :meth:`moved` reaches from ``q``: added to the Hessian, it makes the Newton model that
+        of the energy along the moves, ``E(m(dq))``, rather than along straight lines in the
+        polar coordinates (zero for other models).
+
+        Along the moves the bending vector ``B = theta e(phi)`` is affine in the step, so a
+        load linear in ``B`` (a tendon's length, up to the chords) has a quadratic energy and
+        its Newton step lands on the solution; the polar Hessian's cross term
+        ``d2E / dc dphi`` and its ``d2E / dphi2`` (a force times the curvature) instead send
+        the plane past it. From :meth:`moved` to second order, per segment: ``d2 c_j / dphi2 =
+        c_j`` and ``d2 phi / dphi dc_j = -beta_j / theta``. Where the end angle ``theta`` is
+        small (below :data:`_MOVE_CURVATURE_THETA`: the plane angle's regulariser force over
+        ``theta`` would dominate) or mostly cancelled (an S of PAC: ``|theta|`` below half of
+        ``sum |beta_j c_j|``) the moves themselves are singular and the polar Hessian is kept.
+        """
+        k = self.scene.model.free_plane_angle()
+        if k is None:
+            return jnp.zeros((q.shape[0], q.shape[0]), q.dtype)
+        n, d = self.scene.n_segments, self.scene.dofs_per_segment
+        coords, force = self.scene.coordinates(q), self.scene.coordinates(grad)
+        beta = self.scene.model.plane_angle_basis(jnp.ones((), q.dtype))
+        c = coords[:, :k]
+        theta = jnp.matmul(c, beta, precision=MATMUL_PRECISION)
+        spread = jnp.matmul(jnp.abs(c), jnp.abs(beta), precision=MATMUL_PRECISION)
+        singular = (jnp.abs(theta) < _MOVE_CURVATURE_THETA) | (jnp.abs(theta) < 0.5 * spread)
+        along_phi = jnp.where(singular, 0.0, jnp.sum(force[:, :k] * c, axis=1))
+        turn = jnp.where(singular, 0.0, -force[:, k] / jnp.where(singular, 1.0, theta))
+        cross = (turn[:, None] * beta[None, :]).reshape(-1)
+        # Each segment's block: its angle's row and column (indices of the full layout).
+        angle = np.arange(n) * d + k
+        curvature = (angle[:, None] - k + np.arange(k)[None, :]).reshape(-1)
+        beside = np.repeat(angle, k)
+        full = (
+            jnp.zeros((n * d, n * d), q.dtype)
+            .at[angle, angle]
+            .set(along_phi)
+            .at[beside, curvature]
+            .set(cross)
+            .at[curvature, beside]
+            .set(cross)
+        )
+        free = self.scene.free_coordinates()
+        return full if free is None else full[free][:, free]
 
     def aligned(self, y, tol: float, keep=None):
         """``y`` with the bending plane of each straight segment turned to the force on it.
