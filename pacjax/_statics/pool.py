@@ -26,16 +26,23 @@ from .problem import ScaledProblem
 #: steps for its slot to be refilled): 8 on CPU, 4 on accelerators (see :func:`_steps_per_round`).
 STEPS_PER_ROUND = {"cpu": 8}
 _STEPS_PER_ROUND_DEFAULT = 4
+#: The same while rows wait in the queue for a slot (see :func:`_steps_per_round`).
+QUEUED_STEPS_PER_ROUND = {"cpu": 6}
 
 
-def _steps_per_round() -> int:
+def _steps_per_round(rows_waiting: bool = False) -> int:
     """Steps per round on the default backend. Fewer steps per round leave a finished slot
     idle for fewer steps; more pay the host's work between rounds (dispatch, refilling the
     slots) less often, which decides small pools (a fit's batches of 16 frames). On XLA:CPU 8
-    was as fast as 2 on 2,000 rows in a pool of 128 and faster on small pools
-    (``benchmarks/RESULTS.md``, "Figures behind the solver's settings").
+    was as fast as 2 on 2,000 rows in a pool of 128 and faster on small pools; while rows wait
+    for a slot, a finished row's idle steps cost a waiting row's progress, and rounds of 6 are
+    faster (``benchmarks/RESULTS.md``, "Figures behind the solver's settings" and "Rounds as
+    long as a row").
     """
-    return STEPS_PER_ROUND.get(jax.default_backend(), _STEPS_PER_ROUND_DEFAULT)
+    backend = jax.default_backend()
+    if rows_waiting and backend in QUEUED_STEPS_PER_ROUND:
+        return QUEUED_STEPS_PER_ROUND[backend]
+    return STEPS_PER_ROUND.get(backend, _STEPS_PER_ROUND_DEFAULT)
 
 
 _TAGS = frozenset()
@@ -54,11 +61,11 @@ def _start_block(scene, opts, update, controls, params, q0):
 
 
 @jit
-def _advance(scene, opts, update, controls, params, y, state, reset, y_reset, active):
+def _advance(scene, opts, update, controls, params, y, state, reset, y_reset, active, per_round):
     """One round of the slot pool: restart the ``reset`` slots from ``y_reset`` (scaled
     starting points from :func:`_start_block`, computed once per row rather than for every slot
-    in every round), then run every active slot's continuation for up to
-    :func:`_steps_per_round` steps (fewer when all are done).
+    in every round), then run every active slot's continuation for up to ``per_round`` steps
+    (fewer when all are done; an array, so that rounds of either length share one program).
 
     The steps are those of :func:`pacjax._statics.equilibrium.solve_core` (the same root finder,
     resumed round after round), so a row's iterates do not depend on which rows share the pool.
@@ -66,7 +73,6 @@ def _advance(scene, opts, update, controls, params, y, state, reset, y_reset, ac
     """
     dtype = controls.dtype
     limit = max_total_steps(opts)
-    per_round = _steps_per_round()
     fn = ScaledProblem.root_fn
 
     def one(u, p, y_, st_, reset_, y_start, active_):
@@ -215,6 +221,11 @@ class _RowQueue:
         self.n, self.blocks, self.next = n, blocks, 0
         self.lock = threading.Lock()
 
+    def waiting(self) -> bool:
+        """Whether rows are left to hand out."""
+        with self.lock:
+            return self.next < self.n
+
     def take(self, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         with self.lock:
             rows = np.arange(self.next, min(self.next + k, self.n))
@@ -318,7 +329,19 @@ def _pool_lane(
         if ready is not None:
             ready.wait()
         y, state, done, eq = _round(
-            scene, opts, update, dtype, sharding, u_pool, p_pool, y, state, reset, y_pool, active
+            scene,
+            opts,
+            update,
+            dtype,
+            sharding,
+            u_pool,
+            p_pool,
+            y,
+            state,
+            reset,
+            y_pool,
+            active,
+            rows_queue.waiting(),
         )
         done = np.asarray(done) & active
         if done.any():
@@ -339,8 +362,11 @@ def _empty_pool(scene, controls, params, size):
     return u_pool, p_pool, y_pool
 
 
-def _round(scene, opts, update, dtype, sharding, u_pool, p_pool, y, state, reset, y_pool, active):
-    """One :func:`_advance` round from the pool's host buffers."""
+def _round(
+    scene, opts, update, dtype, sharding, u_pool, p_pool, y, state, reset, y_pool, active, waiting
+):
+    """One :func:`_advance` round from the pool's host buffers; ``waiting``: whether rows wait
+    in the queue for a slot (:func:`_steps_per_round`)."""
     inputs = (
         jnp.asarray(u_pool, dtype),
         jtu.tree_map(jnp.asarray, p_pool),
@@ -351,7 +377,10 @@ def _round(scene, opts, update, dtype, sharding, u_pool, p_pool, y, state, reset
     if sharding is not None:
         inputs = jax.device_put(inputs, sharding)
     u_dev, p_dev, reset_dev, y_dev, active_dev = inputs
-    return _advance(scene, opts, update, u_dev, p_dev, y, state, reset_dev, y_dev, active_dev)
+    per_round = jnp.asarray(_steps_per_round(waiting), jnp.int32)
+    return _advance(
+        scene, opts, update, u_dev, p_dev, y, state, reset_dev, y_dev, active_dev, per_round
+    )
 
 
 #: Rounds already run in this process (:func:`_round_key`), most recent last: a pool of the
@@ -431,7 +460,19 @@ class _RoundCompile(threading.Thread):
             y, state = _initial_state(scene, opts, size, dtype, sharding)
             idle = np.zeros(size, bool)
             out = _round(
-                scene, opts, update, dtype, sharding, u_pool, p_pool, y, state, idle, y_pool, idle
+                scene,
+                opts,
+                update,
+                dtype,
+                sharding,
+                u_pool,
+                p_pool,
+                y,
+                state,
+                idle,
+                y_pool,
+                idle,
+                False,
             )
             jax.block_until_ready(out)
             _round_ran(key)
