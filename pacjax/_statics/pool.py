@@ -36,8 +36,8 @@ def _steps_per_round(rows_waiting: bool = False) -> int:
     slots) less often, which decides small pools (a fit's batches of 16 frames). On XLA:CPU 8
     was as fast as 2 on 2,000 rows in a pool of 128 and faster on small pools; while rows wait
     for a slot, a finished row's idle steps cost a waiting row's progress, and rounds of 6 are
-    faster (``benchmarks/RESULTS.md``, "Figures behind the solver's settings" and "Rounds as
-    long as a row").
+    faster (``benchmarks/RESULTS.md``, "Figures behind the solver's settings" and "A first
+    step as long as Newton's").
     """
     backend = jax.default_backend()
     if rows_waiting and backend in QUEUED_STEPS_PER_ROUND:
