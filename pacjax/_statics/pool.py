@@ -328,21 +328,9 @@ def _pool_lane(
             return
         if ready is not None:
             ready.wait()
-        y, state, done, eq = _round(
-            scene,
-            opts,
-            update,
-            dtype,
-            sharding,
-            u_pool,
-            p_pool,
-            y,
-            state,
-            reset,
-            y_pool,
-            active,
-            rows_queue.waiting(),
-        )
+        pool = (u_pool, p_pool, y, state, reset, y_pool, active)
+        waiting = rows_queue.waiting()
+        y, state, done, eq = _round(scene, opts, update, dtype, sharding, *pool, waiting)
         done = np.asarray(done) & active
         if done.any():
             slots = np.flatnonzero(done)
@@ -459,21 +447,8 @@ class _RoundCompile(threading.Thread):
             u_pool, p_pool, y_pool = _empty_pool(scene, controls, params, size)
             y, state = _initial_state(scene, opts, size, dtype, sharding)
             idle = np.zeros(size, bool)
-            out = _round(
-                scene,
-                opts,
-                update,
-                dtype,
-                sharding,
-                u_pool,
-                p_pool,
-                y,
-                state,
-                idle,
-                y_pool,
-                idle,
-                False,
-            )
+            pool = (u_pool, p_pool, y, state, idle, y_pool, idle)
+            out = _round(scene, opts, update, dtype, sharding, *pool, False)
             jax.block_until_ready(out)
             _round_ran(key)
         except BaseException as error:  # raised again in the pools' threads
