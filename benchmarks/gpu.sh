@@ -11,7 +11,9 @@
 # through a batch, and with PAC_BASELINE_BATCH > 0 the plain-flow baseline in the same process), bench_models.{json,md} (PCC and PolynomialCurvature(3)),
 # bench_baseline.{json,md} (PAC at batch 1,000 against the plain damped flow), with
 # STAGE_BATCH_N > 0 batch_run.json (the summary of one `pacjax batch` run of that many rows:
-# rate, peak memory), and log.txt. Each stage's time limit and size can be set from the
+# rate, peak memory), with STAGE_SOROMOX_S > 0 (and SoRoMoX installed) vs_soromox_{a,b}.json (the
+# side by side of benchmarks/vs_soromox.py at SOROMOX_ROWS rows, each problem its own stage, run
+# first), and log.txt. Each stage's time limit and size can be set from the
 # environment (the names below); a stage whose limit is 0 is skipped. benchmarks/RESULTS.md has what it measured on an H100.
 set -u
 OUT=${OUT:-bench-gpu}
@@ -42,6 +44,12 @@ stage() {  # stage SECONDS NAME COMMAND...
     nproc
 } >"$OUT/machine.txt" 2>&1
 cat "$OUT/machine.txt"
+
+for problem in a b; do
+    stage "${STAGE_SOROMOX_S:-0}" "vs_soromox_$problem" "$PY" benchmarks/vs_soromox.py \
+        --problem "$problem" --rows "${SOROMOX_ROWS:-1000,10000}" \
+        --grad-rows "${SOROMOX_GRAD_ROWS:-100}" --json "$OUT/vs_soromox_$problem.json"
+done
 
 stage "${STAGE_PAC_S:-240}" bench_pac "${CLI[@]}" bench --models PAC --dtypes float64,float32 \
     --batch "${BATCHES:-10000}" --baseline-batch "${PAC_BASELINE_BATCH:-0}" \

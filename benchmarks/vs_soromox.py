@@ -449,13 +449,15 @@ def pacjax_entry(eq, scene: pj.Scene, soromox_tips, soromox_converged) -> dict:
     return entry
 
 
-def run_problem(problem: Problem, sizes, repeats, grad_rows, models, args, log) -> dict:
+def run_problem(problem: Problem, sizes, repeats, grad_rows, models, args, log, out, save):
+    """Fill ``out`` with the problem's measurements, calling ``save()`` after each of them (a
+    run stopped by a time limit keeps what it measured)."""
     quad = args.quadrature
     all_rows = problem.rows(max(sizes + [grad_rows]))
     robot = soromox_robot(problem, quad)
     sm_solve = soromox_solver(problem, args.soromox_tol, args.soromox_max_steps)
     scenes = {name: pacjax_scene(problem, MODELS[name](), quadrature=quad) for name in models}
-    out = {"title": problem.title, "sizes": {}}
+    out.update(title=problem.title, sizes={})
     if problem.tendons:
         out["pacjax_tendon_routing"] = "channel" if channel_available() else "rings (41 guides)"
         log(f"  pacjax tendons: {out['pacjax_tendon_routing']}")
@@ -481,10 +483,11 @@ def run_problem(problem: Problem, sizes, repeats, grad_rows, models, args, log) 
                 entry.update(pacjax_entry(results[name], scene, *sm_rows[:2]))
             entries[name] = entry
         out["sizes"][str(n)] = entries
+        save()
 
     if grad_rows:
         out["gradient"] = run_gradient(problem, robot, all_rows[:grad_rows], models, args, log)
-    return out
+        save()
 
 
 def run_gradient(problem: Problem, robot: GVS, rows, models, args, log) -> dict:
@@ -543,6 +546,8 @@ def machine() -> dict:
         "jax": jax.__version__,
         "jaxlib": importlib.metadata.version("jaxlib"),
         "backend": jax.default_backend(),
+        "accelerator": None if jax.default_backend() == "cpu" else jax.devices()[0].device_kind,
+        "device_count": jax.device_count(),
         "x64": bool(jax.config.jax_enable_x64),
         "compilation_cache": jax.config.jax_compilation_cache_dir,
         "soromox": importlib.metadata.version("soromox"),
@@ -564,7 +569,9 @@ def git(*cmd) -> str:
 def print_tables(record: dict) -> None:
     m = record["machine"]
     print(
-        f"\n# pacjax vs SoRoMoX {m['soromox']} on {m['cpu']} ({m['cpu_count']} cores), "
+        f"\n# pacjax vs SoRoMoX {m['soromox']} on "
+        + (f"{m['accelerator']}, " if m.get("accelerator") else "")
+        + f"{m['cpu']} ({m['cpu_count']} cores), "
         f"jax {m['jax']}, {record['date']}, commit {record['commit']}"
         + (" (+ uncommitted changes)" if record["dirty"] else "")
     )
@@ -670,6 +677,16 @@ def main():
         f"pacjax {pj.__version__}, SoRoMoX {record['machine']['soromox']}, jax {jax.__version__}"
         f", {record['machine']['cpu']}; pacjax channel tendons: {channel_available()}"
     )
+    path = args.json
+    if path is None:
+        suffix = "_quick" if args.quick else ""
+        path = os.path.join(RESULTS_DIR, f"{record['date']}_{record['commit']}{suffix}.json")
+    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+
+    def save():
+        with open(path, "w") as f:
+            json.dump(record, f, indent=2)
+
     for key in keys:
         if args.quick:
             sizes = [16]
@@ -678,20 +695,14 @@ def main():
         else:
             sizes = defaults[key]
         log(f"problem ({key}): {PROBLEMS[key].title}, rows {sizes}")
-        record["problems"][key] = run_problem(
-            PROBLEMS[key], sizes, args.repeats, args.grad_rows, models, args, log
+        out = record["problems"][key] = {}
+        run_problem(
+            PROBLEMS[key], sizes, args.repeats, args.grad_rows, models, args, log, out, save
         )
         # The machine may be shared: how busy it was when this problem ended.
-        record["problems"][key]["load_average_1min_end"] = os.getloadavg()[0]
+        out["load_average_1min_end"] = os.getloadavg()[0]
+        save()
     print_tables(record)
-
-    path = args.json
-    if path is None:
-        suffix = "_quick" if args.quick else ""
-        path = os.path.join(RESULTS_DIR, f"{record['date']}_{record['commit']}{suffix}.json")
-    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
-    with open(path, "w") as f:
-        json.dump(record, f, indent=2)
     print(f"\nrecord: {os.path.relpath(path)}")
 
 
