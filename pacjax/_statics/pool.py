@@ -23,26 +23,27 @@ from .equilibrium import equilibrium_from, make_solver, max_total_steps, start_p
 from .problem import ScaledProblem
 
 #: Continuation steps per round of the slot pool (a finished row waits at most this many
-#: steps for its slot to be refilled): 8 on CPU, 4 on accelerators (see :func:`_steps_per_round`).
-STEPS_PER_ROUND = {"cpu": 8}
-_STEPS_PER_ROUND_DEFAULT = 4
-#: The same while rows wait in the queue for a slot (see :func:`_steps_per_round`).
+#: steps for its slot to be refilled; see :func:`_steps_per_round`).
+STEPS_PER_ROUND = 8
+#: The same while rows wait in the queue for a slot, per backend (see :func:`_steps_per_round`).
 QUEUED_STEPS_PER_ROUND = {"cpu": 6}
 
 
 def _steps_per_round(rows_waiting: bool = False) -> int:
     """Steps per round on the default backend. Fewer steps per round leave a finished slot
     idle for fewer steps; more pay the host's work between rounds (dispatch, refilling the
-    slots) less often, which decides small pools (a fit's batches of 16 frames). On XLA:CPU 8
-    was as fast as 2 on 2,000 rows in a pool of 128 and faster on small pools; while rows wait
-    for a slot, a finished row's idle steps cost a waiting row's progress, and rounds of 6 are
-    faster (``benchmarks/RESULTS.md``, "Figures behind the solver's settings" and "A first
-    step as long as Newton's").
+    slots, and each slot's restart state and result, computed for every slot in every round)
+    less often, which decides small pools (a fit's batches of 16 frames) and accelerators. On
+    XLA:CPU 8 was as fast as 2 on 2,000 rows in a pool of 128 and faster on small pools; while
+    rows wait for a slot, a finished row's idle steps cost a waiting row's progress, and rounds
+    of 6 are faster there. On a GPU rounds of 8 beat rounds of 4 on every batch measured
+    (``benchmarks/RESULTS.md``, "Figures behind the solver's settings", "A first step as long
+    as Newton's" and "The side by side on a GPU").
     """
     backend = jax.default_backend()
     if rows_waiting and backend in QUEUED_STEPS_PER_ROUND:
         return QUEUED_STEPS_PER_ROUND[backend]
-    return STEPS_PER_ROUND.get(backend, _STEPS_PER_ROUND_DEFAULT)
+    return STEPS_PER_ROUND
 
 
 _TAGS = frozenset()
