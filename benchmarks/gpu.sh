@@ -14,7 +14,7 @@
 # rate, peak memory), with STAGE_SOROMOX_S > 0 (and SoRoMoX installed) vs_soromox_{a,b}.json (the
 # side by side of benchmarks/vs_soromox.py at SOROMOX_ROWS rows, each problem its own stage, run
 # first), and log.txt. Each stage's time limit and size can be set from the
-# environment (the names below); a stage whose limit is 0 is skipped. benchmarks/RESULTS.md has what it measured on an H100.
+# environment (the names below); a stage whose limit is 0 is skipped. benchmarks/RESULTS.md has what it measured on an H100 and an H200.
 set -u
 OUT=${OUT:-bench-gpu}
 mkdir -p "$OUT"
