@@ -1,21 +1,24 @@
 """Real-time factor of the full dynamics of the paper's robot after a step in commands.
 
 Usage: python benchmarks/bench_dynamics.py [--models PAC PCC Poly2] [--duration 0.5]
-       [--rtol 1e-4] [--solvers rosenbrock23 kvaerno5] [--batch 64] [--reference-rtol 1e-7]
+       [--rtol 1e-4] [--solvers rosenbrock23 rosenbrock23-stiff kvaerno5] [--batch 64]
+       [--rows-at-once N] [--reference-rtol 1e-7]
        [--reference-solver rosenbrock23] [--repeats 3] [--json out.json]
 
 The robot (``pj.presets.stella2023``, hanging, 200 g payload) starts at rest in its equilibrium
 under zero commands; at t = 0 the commands step to the demo's "section 1 bend" (40 mm on one
 tendon of section 1) and the motion is simulated with the default damping (5 % on the lowest
 mode). For each model and solver: compile time (first call minus the median warm call), warm
-run time (median of ``--repeats``, the solvers alternated), solver steps (accepted and
-rejected), the real-time factor ``simulated time / warm wall time`` (> 1 is faster than real
-time), and the largest distance of the tip from a reference run at ``--reference-rtol``
-(``--reference-solver``; the same method 10^3 times tighter converges on the exact motion, and
-Kvaerno5 is checked against it) over 11 save times. The batch: ``pj.simulate_batch`` of
-``--batch`` step commands (each a pull of up to 40 mm on one random tendon), its aggregate
-real-time factor
-``batch * simulated time / warm wall time``. Nothing is asserted.
+run time (median of ``--repeats``, the solvers alternated; ``rosenbrock23`` is ``simulate``'s
+default, the exact Jacobian held over 20 steps, ``rosenbrock23-stiff`` the stiff one every
+step), solver steps (accepted and rejected), the real-time factor ``simulated time / warm wall
+time`` (> 1 is faster than real time), and the largest distance of the tip from a reference run
+at ``--reference-rtol`` (``--reference-solver``; the same method 10^3 times tighter converges on
+the exact motion, and Kvaerno5 is checked against it) over 11 save times. The batch:
+``pj.simulate_batch`` of ``--batch`` step commands (each a pull of up to 40 mm on one random
+tendon) with its default solver (``--rows-at-once``: rows vectorised together; default one at a
+time on a CPU), its aggregate real-time factor ``batch * simulated time / warm wall time``.
+Nothing is asserted.
 """
 
 import argparse
@@ -32,7 +35,11 @@ import pacjax as pj
 
 STEP = np.array([0.04, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0])
 MODELS = {"PAC": pj.PAC, "PCC": pj.PCC, "Poly2": lambda: pj.PolynomialCurvature(2)}
-SOLVERS = {"rosenbrock23": pj.dynamics.rosenbrock23, "kvaerno5": pj.dynamics.kvaerno5}
+SOLVERS = {
+    "rosenbrock23": pj.dynamics.rosenbrock23,
+    "rosenbrock23-stiff": lambda: pj.dynamics.rosenbrock23("stiff"),
+    "kvaerno5": pj.dynamics.kvaerno5,
+}
 
 
 def _time(fn):
@@ -119,17 +126,18 @@ def run_model(model: str, args) -> dict:
                 start.q,
                 saveat=[args.duration],
                 damping=damping,
-                solver=pj.dynamics.rosenbrock23(),
                 rtol=args.rtol,
                 atol=args.rtol * 1e-2,
                 max_steps=args.max_steps,
+                rows_at_once=args.rows_at_once,
             )
 
         first_b, traj = _time(batch)
         warm_b = statistics.median(_time(batch)[0] for _ in range(max(args.repeats - 1, 1)))
         out["batch"] = {
             "rows": args.batch,
-            "solver": "rosenbrock23",
+            "solver": "default",
+            "rows_at_once": args.rows_at_once,
             "successful_rows": int(np.sum(np.asarray(traj.successful))),
             "max_steps_per_row": int(np.max(traj.num_steps)),
             "median_steps_per_row": float(np.median(traj.num_steps)),
@@ -149,6 +157,7 @@ def main():
     parser.add_argument("--reference-rtol", type=float, default=1e-7)
     parser.add_argument("--reference-solver", default="rosenbrock23", choices=tuple(SOLVERS))
     parser.add_argument("--batch", type=int, default=64)
+    parser.add_argument("--rows-at-once", type=int, default=None)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--max-steps", type=int, default=200_000)
     parser.add_argument("--json")

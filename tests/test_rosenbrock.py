@@ -7,9 +7,16 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 from dynamics_scenes import CONTROLS, SCENE, small_scene
+from jax.flatten_util import ravel_pytree
 
 import pacjax as pj
-from pacjax._dynamics.equations import EquationsOfMotion, vector_field, vector_field_jacobian
+from pacjax._dynamics.equations import (
+    EquationsOfMotion,
+    difference_jacobian,
+    plane_angle_weights,
+    vector_field,
+    vector_field_jacobian,
+)
 from pacjax._dynamics.rosenbrock import Rosenbrock23
 from pacjax._model.inertia import mass_matrix
 from pacjax._model.inputs import as_traced_leaves
@@ -94,6 +101,63 @@ def test_stiff_van_der_pol_matches_kvaerno5():
     np.testing.assert_array_equal(ys["ros_autonomous"][1], ys["ros"][1])
 
 
+def _van_der_pol(t, y, mu):
+    x, v = y
+    return v, mu * (1 - x**2) * v - x
+
+
+def _van_der_pol_end(solver, mu=50.0):
+    return diffrax.diffeqsolve(
+        diffrax.ODETerm(_van_der_pol),
+        solver,
+        0.0,
+        100.0,
+        None,
+        (jnp.array(2.0), jnp.array(0.0)),
+        args=mu,
+        stepsize_controller=diffrax.PIDController(rtol=1e-6, atol=1e-8),
+        max_steps=100_000,
+    )
+
+
+def test_held_jacobian_serves_several_steps():
+    """``reuse=5``: a Jacobian is made once per five accepted steps (counted as it is made, with
+    the retries after rejected steps), and the motion is the same to the tolerance."""
+    made = {1: 0, 5: 0}
+
+    def counted(reuse):
+        def jacobian(t, y, mu):
+            def count():
+                made[reuse] += 1
+
+            jax.debug.callback(count)
+            x, v = y
+            return jnp.array([[0.0, 1.0], [-2.0 * mu * x * v - 1.0, mu * (1 - x**2)]])
+
+        return jacobian
+
+    sols = {r: _van_der_pol_end(Rosenbrock23(jacobian=counted(r), reuse=r)) for r in (1, 5)}
+    for sol in sols.values():
+        assert sol.result == diffrax.RESULTS.successful
+    assert made[1] == int(sols[1].stats["num_steps"])
+    accepted, steps = int(sols[5].stats["num_accepted_steps"]), int(sols[5].stats["num_steps"])
+    assert accepted / 5 <= made[5] <= accepted / 5 + (steps - accepted) + 1
+    np.testing.assert_allclose(sols[5].ys[0], sols[1].ys[0], atol=1e-3)
+    with pytest.raises(ValueError, match="reuse"):
+        Rosenbrock23(reuse=0)
+
+
+def test_error_weight_scales_the_error_estimate():
+    """A zero weight on the fast velocity leaves the step size to the position alone: fewer
+    steps, the position still to the tolerance."""
+    plain = _van_der_pol_end(Rosenbrock23())
+    weighted = _van_der_pol_end(
+        Rosenbrock23(error_weight=lambda y, mu: (jnp.ones_like(y[0]), jnp.zeros_like(y[1])))
+    )
+    assert int(weighted.stats["num_steps"]) < int(plain.stats["num_steps"])
+    np.testing.assert_allclose(weighted.ys[0], plain.ys[0], atol=1e-3)
+
+
 def test_gradient_through_adaptive_steps_matches_finite_differences():
     """Reverse mode through Rosenbrock23's adaptive steps (``W`` is held out of the derivative:
     a W-method's solution does not depend on its matrix to the order of the method) equals central
@@ -123,6 +187,50 @@ def test_gradient_through_adaptive_steps_matches_finite_differences():
     fd = float((end(mu + h) - end(mu - h)) / (2 * h))
     assert abs(fd) > 1e-3
     assert abs(grad - fd) < 1e-6 * abs(fd)
+
+
+def test_difference_jacobian_is_the_vector_fields():
+    """The held exact Jacobian by forward differences equals ``jax.jacfwd`` of the vector
+    field, in motion with the tendons taut, to the differences' truncation (a few 1e-5 of the
+    largest entries, the tendon springs')."""
+    scene = as_traced_leaves(SCENE, jnp.float64)
+    model = EquationsOfMotion.build(scene, pj.Damping.modal(SCENE), 1e-6, jnp.float64)
+    n = scene.n_dofs
+    y = (jnp.linspace(0.2, -0.3, n).at[-1].set(-0.002), jnp.linspace(-1.0, 2.0, n))
+    args = (model, CONTROLS + 0.004)
+    differences = jax.jit(difference_jacobian)(0.0, y, args)
+    x0, unravel = ravel_pytree(y)
+    exact = jax.jit(jax.jacfwd(lambda x: ravel_pytree(vector_field(0.0, unravel(x), args))[0]))(x0)
+    scale = float(jnp.abs(exact).max())
+    np.testing.assert_allclose(differences, exact, rtol=1e-4, atol=1e-6 * scale)
+
+
+def test_plane_angle_weights_follow_the_bends():
+    """PAC: a straight segment's ``phi`` weighs nothing, a segment bent by 0.3 rad 0.3, an S
+    (no bend at its end) its bend at the middle, one bent past a radian 1; every other
+    coordinate and the velocities' likewise; Cartesian models weigh all ones."""
+    length = 0.1
+    segments = [pj.Segment(length, 0.02, 600.0, linear_density=0.3)] * 4
+    scene = pj.Scene(pj.Robot(segments), pj.PAC())
+    model = EquationsOfMotion.build(scene, pj.Damping(), 1e-6, jnp.float64)
+    a = 2.0
+    coords = jnp.array(
+        [
+            [0.0, 0.0, 1.3, 0.0],
+            [0.3 / length, 0.0, 0.4, 1e-3],
+            [a, -2 * a / length, -2.0, 0.0],
+            [20.0, 0.0, 0.1, 0.0],
+        ]
+    )
+    q = scene.free_part(coords)
+    wq, wv = plane_angle_weights((q, q), (model, None))
+    expected = jnp.ones_like(coords).at[:, 2].set(jnp.array([0.0, 0.3, a * length / 4, 1.0]))
+    np.testing.assert_allclose(wq, scene.free_part(expected), rtol=1e-12, atol=1e-15)
+    np.testing.assert_array_equal(wv, wq)
+    cartesian = pj.Scene(pj.Robot(segments), pj.PolynomialCurvature(1))
+    model = EquationsOfMotion.build(cartesian, pj.Damping(), 1e-6, jnp.float64)
+    q = jnp.ones(cartesian.n_dofs)
+    np.testing.assert_array_equal(plane_angle_weights((q, q), (model, None))[0], jnp.ones_like(q))
 
 
 @pytest.mark.slow  # the reference compiles the forces' plain Hessian (16 s)

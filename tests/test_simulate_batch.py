@@ -1,4 +1,5 @@
-"""``pj.simulate_batch``: rows of one vectorised integration, each equal to its own simulation."""
+"""``pj.simulate_batch``: rows one at a time or in vectorised groups, each equal to its own
+simulation."""
 
 import jax.numpy as jnp
 import numpy as np
@@ -28,6 +29,10 @@ def test_rows_equal_their_own_simulations():
         assert int(batch.num_steps[i]) == int(single.num_steps)
     # Rows with different commands take their own steps.
     assert len(set(np.asarray(batch.num_steps).tolist())) > 1
+    # As one vectorised group (an accelerator's default), each row still takes its own steps.
+    group = pj.simulate_batch(SCENE, (0.0, 0.02), COMMANDS, q0, rows_at_once=3, **kwargs)
+    np.testing.assert_allclose(group.q, batch.q, rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(group.num_steps, batch.num_steps)
 
 
 def test_batch_arguments_are_checked_before_compiling():
@@ -43,3 +48,7 @@ def test_batch_arguments_are_checked_before_compiling():
         pj.simulate_batch(SCENE, (0.0, 0.01), bad)
     with pytest.raises(ValueError, match="devices"):
         pj.simulate_batch(SCENE, (0.0, 0.01), COMMANDS, devices=99)
+    with pytest.raises(ValueError, match="rows_at_once"):
+        pj.simulate_batch(SCENE, (0.0, 0.01), COMMANDS, rows_at_once=0)
+    with pytest.raises(TypeError, match="rows_at_once"):
+        pj.simulate_batch(SCENE, (0.0, 0.01), COMMANDS, rows_at_once=2.5)

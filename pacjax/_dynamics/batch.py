@@ -1,5 +1,6 @@
-"""Many simulations of one scene at once: :func:`simulate_batch`, one vectorised integration of
-:func:`pacjax._dynamics.simulate.simulate`'s program, its rows split over the local devices."""
+"""Many simulations of one scene at once: :func:`simulate_batch`, :func:`pacjax._dynamics.simulate.
+simulate`'s program over rows, vectorised a group of rows at a time (all of them on an
+accelerator or over several devices, one at a time on a CPU)."""
 
 import diffrax
 import equinox as eqx
@@ -20,6 +21,7 @@ from .simulate import (
     check_qdot,
     check_simulation_controls,
     check_span,
+    default_solver,
     integrate,
     prepare,
 )
@@ -43,6 +45,7 @@ def simulate_batch(
     max_steps: int = 100_000,
     phi_inertia: float = PHI_INERTIA_FACTOR,
     devices: int | None = None,
+    rows_at_once: int | None = None,
 ) -> Trajectory:
     """Many simulations of one scene at once (datasets, learning, sweeps over commands).
 
@@ -54,6 +57,15 @@ def simulate_batch(
             least one of ``controls``, ``q0``, ``qdot0`` has a row per simulation).
         devices: local devices to split the rows over (default all); the rows are padded to a
             multiple of it.
+        rows_at_once: rows integrated as one vectorised integration (each device's rows in
+            groups of this many, one group after another). In a group every row takes as many
+            steps as the one that needs most, and a held Jacobian cannot be skipped (a
+            ``vmap``-ped choice computes both sides), so each group steps with the stiff
+            Jacobian every step; one row at a time keeps :func:`simulate`'s solver and its own
+            steps. Default: one on a CPU, where vectorising small rows saves little, and all
+            rows on an accelerator or when the rows are split over several devices.
+        solver: as in :func:`simulate` for one row at a time; for groups, the default at
+            moderate tolerances is ``rosenbrock23("stiff")``.
         Everything else as in :func:`simulate` (no dense output).
 
     Returns:
@@ -100,11 +112,16 @@ def simulate_batch(
         u = rows_of(controls, lambda x: check_simulation_controls(scene, x, t0, dtype), "controls")
     q = rows_of(q0, lambda x: check_q(scene, x, dtype), "q0")
     v = rows_of(qdot0, lambda x: check_qdot(scene, x, dtype), "qdot0")
+    n_devices = check_devices(devices)
+    padded = -(-b // n_devices) * n_devices
+    group = _rows_at_once(rows_at_once, padded)
+    if n_devices > 1:  # rows sharded over devices are one group: a map over them would gather
+        group = padded
+    if solver is None:
+        solver = default_solver(rtol, batch=group > 1)
     scene, damping, opts, span, ts = prepare(
         scene, t0, t1, saveat, damping, solver, rtol, atol, max_steps, False, phi_inertia, None
     )
-    n_devices = check_devices(devices)
-    padded = -(-b // n_devices) * n_devices
     batched = (u, q, v) if not callable(u) else (q, v)
     batched = jtu.tree_map(lambda x: jnp.asarray(pad_rows(np.asarray(x), padded)), batched)
     sharding = row_sharding(n_devices)
@@ -112,15 +129,29 @@ def simulate_batch(
         batched = jax.device_put(batched, sharding)
     dt0 = None if dt0 is None else jnp.asarray(dt0, dtype)
     schedule = u if callable(u) else None
-    traj = _simulate_rows(scene, damping, schedule, batched, span, ts, dt0, opts)
+    traj = _simulate_rows(scene, damping, schedule, batched, span, ts, dt0, opts, group)
     return jtu.tree_map(lambda x: x[:b], traj)
 
 
+def _rows_at_once(rows_at_once: int | None, rows: int) -> int:
+    if rows_at_once is None:
+        return 1 if jax.default_backend() == "cpu" else rows
+    if isinstance(rows_at_once, bool) or not isinstance(rows_at_once, (int, np.integer)):
+        raise TypeError(f"rows_at_once must be an integer, got {rows_at_once!r}")
+    if rows_at_once < 1:
+        raise ValueError(f"rows_at_once must be >= 1, got {rows_at_once}")
+    return min(int(rows_at_once), rows)
+
+
 @eqx.filter_jit
-def _simulate_rows(scene, damping, schedule, batched, span, ts, dt0, opts):
+def _simulate_rows(scene, damping, schedule, batched, span, ts, dt0, opts, group):
     def one(row):
         u, q, v = row if schedule is None else (schedule, *row)
         q = aligned_rest_start(scene, u, q, v, span[0])
         return integrate(scene, damping, u, q, v, span, ts, dt0, opts)
 
-    return jax.vmap(one)(batched)
+    if group >= jtu.tree_leaves(batched)[0].shape[0]:
+        return jax.vmap(one)(batched)
+    if group == 1:  # a plain loop: lax.map's groups, even of one row, are vmap-ped
+        return jax.lax.map(one, batched)
+    return jax.lax.map(one, batched, batch_size=group)

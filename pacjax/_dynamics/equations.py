@@ -1,5 +1,6 @@
-"""The equations of motion: the paper's full model (its eq. 7) as a vector field and its
-Jacobian with the inertia held, for :mod:`pacjax._dynamics.simulate`.
+"""The equations of motion: the paper's full model (its eq. 7) as a vector field, its Jacobian
+(exact, by differences, or with the inertia held) and the weights its coordinates' errors take,
+for :mod:`pacjax._dynamics.simulate`.
 
     M(q) qddot + C(q, qdot) qdot + G(q) + D qdot + K(q) = A(q) f_act + Q_ext(q)
 
@@ -30,6 +31,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import lineax as lx
+from jax.flatten_util import ravel_pytree
 from jaxtyping import Array, Float
 
 from .._config import MATMUL_PRECISION
@@ -282,3 +284,58 @@ def vector_field_jacobian(t, y, args):
     q, qdot = y
     u, udot = control_fn(controls, model.scene.n_tendons, q.dtype)(t)
     return model.stiff_jacobian(q, qdot, u, udot)
+
+
+def difference_jacobian(t, y, args):
+    """The exact Jacobian of :func:`vector_field` along the flattened state ``(q, qdot)``, by
+    forward differences, one state coordinate at a time.
+
+    Exact up to the differences' truncation (about the square root of the machine epsilon,
+    relative), which a W-method does not feel. One vector field per coordinate in a loop: the
+    program holds one more copy of the vector field, where ``jax.jacfwd`` traces its forward
+    derivative (a program several times larger, compiled for seconds longer, and no faster on
+    CPU: every coordinate's derivative costs about a vector field either way).
+    """
+    x0, unravel = ravel_pytree(y)
+
+    def f(x):
+        return ravel_pytree(vector_field(t, unravel(x), args))[0]
+
+    f0 = f(x0)
+    steps = jnp.sqrt(jnp.finfo(x0.dtype).eps) * jnp.maximum(jnp.abs(x0), 1.0)
+
+    def column(j):
+        step = steps[j]
+        return (f(x0.at[j].add(step)) - f0) / step
+
+    return jax.lax.map(column, jnp.arange(x0.size)).T
+
+
+def plane_angle_weights(y, args):
+    """Weights on the error of each coordinate and velocity (a pytree like ``y = (q, qdot)``):
+    one, but on PCC/PAC's free plane angle ``phi`` the segment's bend ``theta`` (rad, up to 1).
+
+    Turning the bending plane by ``dphi`` moves a segment bent by ``theta`` by about
+    ``theta dphi`` of its length (``dphi`` of it once ``theta`` passes a radian): the error in
+    ``phi`` (and in its rate) moves the body in proportion to ``theta``. Near straight the
+    polar coordinates swing ``phi`` round fast while the body barely moves; measured as it
+    moves the body, that swing no longer sets the step size. ``theta`` is the larger of the
+    bending angles at the middle and the end of the segment (an S-shaped PAC segment bends at
+    its middle with none at its end).
+    """
+    model, _ = args
+    scene = model.scene
+    q, _ = y
+    weights = jnp.ones_like(q)
+    k = scene.model.free_plane_angle()
+    if k is None:
+        return weights, weights
+    coords = scene.coordinates(q)
+    lengths = scene.robot.stacked("length").astype(q.dtype)
+    s = lengths[:, None] * jnp.asarray([0.5, 1.0], q.dtype)
+    basis = scene.model.plane_angle_basis(s)  # (segments, 2, k)
+    bends = jnp.einsum("nk,npk->np", coords[:, :k], basis, precision=MATMUL_PRECISION)
+    theta = jnp.max(jnp.abs(bends), axis=1)
+    full = jnp.ones_like(coords).at[:, k].set(jnp.minimum(theta, 1.0))
+    weights = scene.free_part(full)
+    return weights, weights

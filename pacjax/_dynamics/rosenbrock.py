@@ -21,6 +21,14 @@ The method (L. F. Shampine, M. W. Reichelt, "The MATLAB ODE suite", SIAM J. Sci.
     error = h / 6 (k1 - 2 k2 + k3)
 
 Second order, L-stable; dense output is the cubic Hermite interpolant of ``y0, y1, F0, F2``.
+
+A W-method's order holding with any ``J`` also lets one ``J`` serve several steps, as stiff codes
+(CVODE, RADAU5) hold theirs: with ``reuse > 1`` the Jacobian is made at the start of a step
+only after ``reuse`` accepted steps with the last one (or after a jump), and is carried in the
+solver state meanwhile. On one trajectory that makes an exact Jacobian (dear: one vector field
+per state coordinate) affordable; in a ``vmap``-ped batch the choice between making it and
+holding it becomes a select, so every step makes it, and a batch wants ``reuse=1`` with a
+cheap ``J``.
 The error estimate is of third order with the exact Jacobian and of second with a stand-in, so
 the step shrinks faster with the tolerance than a second-order method's must. It suits the
 moderate tolerances (1e-3 to 1e-5) of control and learning; for tight ones an implicit
@@ -51,6 +59,12 @@ class Rosenbrock23(diffrax.AbstractAdaptiveSolver):
         autonomous: the vector field does not depend on ``t`` (constant controls), so ``T`` is
             zero. Its forward derivative in ``t`` is then left out: it traced the whole vector
             field once more per step.
+        reuse: accepted steps one Jacobian serves (1: a new one every step; see the module).
+        error_weight: ``(y, args) -> w``, a pytree like ``y``: the error estimate is multiplied
+            by ``w`` before the step-size controller scales it, so that a coordinate whose error
+            moves the body less than its size suggests (the plane angle of a nearly straight
+            segment, :func:`pacjax._dynamics.equations.plane_angle_weights`) is held less
+            tightly. None: every coordinate as it is.
     """
 
     term_structure: ClassVar = diffrax.AbstractTerm
@@ -59,6 +73,12 @@ class Rosenbrock23(diffrax.AbstractAdaptiveSolver):
     )
     jacobian: Callable | None = eqx.field(static=True, default=None)
     autonomous: bool = eqx.field(static=True, default=False)
+    reuse: int = eqx.field(static=True, default=1)
+    error_weight: Callable | None = eqx.field(static=True, default=None)
+
+    def __check_init__(self):
+        if not (isinstance(self.reuse, int) and self.reuse >= 1):
+            raise ValueError(f"Rosenbrock23.reuse must be an integer >= 1, got {self.reuse!r}")
 
     def order(self, terms):
         return 2
@@ -67,17 +87,32 @@ class Rosenbrock23(diffrax.AbstractAdaptiveSolver):
         return 3
 
     def init(self, terms, t0, t1, y0, args):
-        # First same as last: the solver state is the vector field at the current state.
-        return terms.vf(t0, y0, args)
+        # First same as last: the solver state is the vector field at the current state, and
+        # with reuse the Jacobian held and the accepted steps it has served (``reuse`` now: the
+        # first step makes one).
+        f0 = terms.vf(t0, y0, args)
+        if self.reuse == 1:
+            return f0
+        n = ravel_pytree(y0)[0].size
+        dtype = ravel_pytree(y0)[0].dtype
+        return f0, jnp.zeros((n, n), dtype), jnp.asarray(self.reuse, jnp.int32)
 
     def func(self, terms, t0, y0, args):
         return terms.vf(t0, y0, args)
 
+    def _jacobian(self, t, y, args, f):
+        x, _ = ravel_pytree(y)
+        if self.jacobian is None:
+            return jax.jacfwd(lambda z: f(t, z))(x)
+        return self.jacobian(t, y, args)
+
     def step(self, terms, t0, t1, y0, args, solver_state, made_jump):
-        if made_jump is False:  # resolved when traced: no second copy of the vector field
-            f0_tree = solver_state
+        if self.reuse == 1:
+            f0_tree, held, age = solver_state, None, None
         else:
-            f0_tree = jax.lax.cond(made_jump, lambda: terms.vf(t0, y0, args), lambda: solver_state)
+            f0_tree, held, age = solver_state
+        if made_jump is not False:  # resolved when traced: no second copy of the vector field
+            f0_tree = jax.lax.cond(made_jump, lambda: terms.vf(t0, y0, args), lambda: f0_tree)
         x0, unravel = ravel_pytree(y0)
 
         def f(t, x):
@@ -85,10 +120,12 @@ class Rosenbrock23(diffrax.AbstractAdaptiveSolver):
 
         f0 = ravel_pytree(f0_tree)[0]
         h = t1 - t0
-        if self.jacobian is None:
-            jac = jax.jacfwd(lambda x: f(t0, x))(x0)
+        if held is None:
+            jac = self._jacobian(t0, y0, args, f)
         else:
-            jac = self.jacobian(t0, y0, args)
+            fresh = (age >= self.reuse) | jnp.asarray(made_jump)
+            jac = jax.lax.cond(fresh, lambda: self._jacobian(t0, y0, args, f), lambda: held)
+            age = jnp.where(fresh, 0, age) + 1
         # Neither W nor T carry gradients: the step's derivative is that of the method with W
         # held fixed, a W-method's own (diffrax's implicit solvers stop them the same way).
         jac = jax.lax.stop_gradient(jac)
@@ -110,7 +147,11 @@ class Rosenbrock23(diffrax.AbstractAdaptiveSolver):
         f2_tree = terms.vf(t1, unravel(x1), args)
         f2 = ravel_pytree(f2_tree)[0]
         k3 = solve(f2 - _E32 * (k2 - f1) - 2.0 * (k1 - f0) + hdt)
-        error = (h / 6.0) * (k1 - 2.0 * k2 + k3)
+        error = unravel((h / 6.0) * (k1 - 2.0 * k2 + k3))
+        if self.error_weight is not None:
+            weight = jax.lax.stop_gradient(self.error_weight(y0, args))
+            error = jax.tree.map(jnp.multiply, error, weight)
         y1 = unravel(x1)
         dense_info = dict(y0=y0, y1=y1, k0=unravel(h * f0), k1=unravel(h * f2))
-        return y1, unravel(error), dense_info, f2_tree, diffrax.RESULTS.successful
+        state = f2_tree if held is None else (f2_tree, jac, age)
+        return y1, error, dense_info, state, diffrax.RESULTS.successful

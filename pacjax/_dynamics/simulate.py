@@ -4,10 +4,13 @@ diffrax.
 The state ``(q, qdot)`` is integrated with adaptive steps (PID controller) by a stiff solver:
 the tendon springs, the axial stiffness and the stiffness-proportional damping are fast against
 the soft body's motion. At moderate tolerances (``rtol >= 1e-5``) the default is
-:class:`pacjax._dynamics.rosenbrock.Rosenbrock23`, a linearly implicit W-method, with the
-Jacobian of its stiff part (``EquationsOfMotion.stiff_jacobian``): the forces' derivatives with
-the inertia held, without the inertia's own derivatives, the dearest part of an exact
-Jacobian. At tight ones it is ``diffrax.Kvaerno5`` (L-stable, 5th order), whose
+:class:`pacjax._dynamics.rosenbrock.Rosenbrock23`, a linearly implicit W-method
+(:func:`rosenbrock23`), with the vector field's exact Jacobian (by differences) made once per
+several steps: the inertia's own derivatives, which the forces' Jacobian leaves out, are fast
+where PCC/PAC's plane angle swings round a segment passing near straight, and without them the
+steps there were several times shorter. Its error estimate weighs each plane angle by its
+segment's bend (the body's motion, not the coordinate's). At tight tolerances it is
+``diffrax.Kvaerno5`` (L-stable, 5th order), whose
 stage equations are solved by diffrax's chord method with the Jacobian taken in forward mode
 (:class:`pacjax._chord.DenseChord`). The vector field takes the model and controls as
 arguments, not by closure, so that its trace and its derivatives' are made once. Gradients of a
@@ -41,10 +44,23 @@ from .._model.scene import Scene
 from .._results import RESULTS
 from .._statics.problem import ScaledProblem
 from .damping import Damping
-from .equations import EquationsOfMotion, vector_field, vector_field_jacobian
+from .equations import (
+    EquationsOfMotion,
+    difference_jacobian,
+    plane_angle_weights,
+    vector_field,
+    vector_field_jacobian,
+)
 from .rosenbrock import Rosenbrock23
 
-__all__ = ["Trajectory", "simulate", "rosenbrock23", "ROSENBROCK_RTOL", "default_solver"]
+__all__ = [
+    "Trajectory",
+    "simulate",
+    "rosenbrock23",
+    "ROSENBROCK_RTOL",
+    "JACOBIAN_REUSE",
+    "default_solver",
+]
 
 
 # ------------------------------------------------------------------------------ simulate
@@ -134,8 +150,8 @@ def simulate(
         damping: a :class:`Damping`; default :meth:`Damping.modal` (5 % on the lowest mode,
             stiffness-proportional, motors ``kappa_D = beta kappa_P``). ``Damping()``: none.
         solver: a diffrax solver. Default: for ``rtol >= 1e-5``, :func:`rosenbrock23` (a
-            linearly implicit method with the dynamics' stiff Jacobian: cheap steps for
-            control and learning); tighter, ``diffrax.Kvaerno5`` with
+            linearly implicit method, the exact Jacobian made once per several steps: cheap
+            steps for control and learning); tighter, ``diffrax.Kvaerno5`` with
             :class:`pacjax._chord.DenseChord` (diffrax's chord method with a forward-mode
             Jacobian). A non-stiff solver such as ``diffrax.Tsit5()`` only suits scenes without
             stiff tendons or damping.
@@ -314,22 +330,52 @@ def _result(result: diffrax.RESULTS) -> RESULTS:
     return RESULTS.where(result == diffrax.RESULTS.successful, RESULTS.successful, failed)
 
 
-def rosenbrock23() -> Rosenbrock23:
-    """:class:`Rosenbrock23` with the Jacobian of the dynamics' stiff part
-    (:meth:`EquationsOfMotion.stiff_jacobian`): :func:`simulate`'s solver at moderate
-    tolerances."""
-    return Rosenbrock23(jacobian=vector_field_jacobian)
+#: Accepted steps one exact Jacobian serves in :func:`rosenbrock23`'s default.
+JACOBIAN_REUSE = 20
+
+
+def rosenbrock23(jacobian: str = "exact", reuse: int | None = None) -> Rosenbrock23:
+    """:class:`Rosenbrock23` for the dynamics: :func:`simulate`'s solver at moderate tolerances.
+
+    Args:
+        jacobian: ``"exact"``: the vector field's Jacobian by differences
+            (:func:`pacjax._dynamics.equations.difference_jacobian`), one per ``reuse``
+            accepted steps (default :data:`JACOBIAN_REUSE`): dear (a vector field per state
+            coordinate) but it holds the inertia's fast part, so the steps are several times
+            fewer. ``"stiff"``: :meth:`EquationsOfMotion.stiff_jacobian`, the forces'
+            derivatives with the inertia held, cheap enough to make every step (default
+            ``reuse=1``): :func:`pacjax.simulate_batch`'s choice, since a ``vmap``-ped batch
+            cannot skip making a held Jacobian (:mod:`pacjax._dynamics.rosenbrock`).
+        reuse: accepted steps one Jacobian serves.
+
+    Either way the plane angles' errors are weighted by their segments' bends
+    (:func:`pacjax._dynamics.equations.plane_angle_weights`).
+    """
+    if jacobian == "exact":
+        function, default_reuse = difference_jacobian, JACOBIAN_REUSE
+    elif jacobian == "stiff":
+        function, default_reuse = vector_field_jacobian, 1
+    else:
+        raise ValueError(f'jacobian must be "exact" or "stiff", got {jacobian!r}')
+    return Rosenbrock23(
+        jacobian=function,
+        reuse=default_reuse if reuse is None else reuse,
+        error_weight=plane_angle_weights,
+    )
 
 
 #: ``rtol`` from which :func:`simulate` takes :func:`rosenbrock23` by default (Kvaerno5 below).
 ROSENBROCK_RTOL = 1e-5
 
 
-def default_solver(rtol: float) -> diffrax.AbstractSolver:
-    """:func:`rosenbrock23` from ``rtol >= ROSENBROCK_RTOL``: one Jacobian, one factorisation
-    and two vector fields a step; below it Kvaerno5 with :class:`pacjax._chord.DenseChord`, whose
-    fifth order takes fewer (dearer) steps to a tight tolerance."""
-    return rosenbrock23() if rtol >= ROSENBROCK_RTOL else kvaerno5()
+def default_solver(rtol: float, batch: bool = False) -> diffrax.AbstractSolver:
+    """From ``rtol >= ROSENBROCK_RTOL``, :func:`rosenbrock23` (for a ``batch``, with the stiff
+    Jacobian every step): one factorisation and two vector fields a step; below it Kvaerno5
+    with :class:`pacjax._chord.DenseChord`, whose fifth order takes fewer (dearer) steps to a
+    tight tolerance."""
+    if rtol < ROSENBROCK_RTOL:
+        return kvaerno5()
+    return rosenbrock23("stiff" if batch else "exact")
 
 
 @eqx.filter_jit
