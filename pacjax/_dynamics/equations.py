@@ -293,8 +293,8 @@ def difference_jacobian(t, y, args):
     Exact up to the differences' truncation (about the square root of the machine epsilon,
     relative), which a W-method does not feel. One vector field per coordinate in a loop: the
     program holds one more copy of the vector field, where ``jax.jacfwd`` traces its forward
-    derivative (a program several times larger, compiled for seconds longer, and no faster on
-    CPU: every coordinate's derivative costs about a vector field either way).
+    derivative (a program several times larger, compiled for seconds longer, at about the same
+    cost on CPU: every coordinate's derivative costs about a vector field either way).
     """
     x0, unravel = ravel_pytree(y)
 

@@ -22,6 +22,11 @@ The method (L. F. Shampine, M. W. Reichelt, "The MATLAB ODE suite", SIAM J. Sci.
 
 Second order, L-stable; dense output is the cubic Hermite interpolant of ``y0, y1, F0, F2``.
 
+The error estimate is of third order with the exact Jacobian and of second with a stand-in, so
+the step shrinks faster with the tolerance than a second-order method's must. It suits the
+moderate tolerances (1e-3 to 1e-5) of control and learning; for tight ones an implicit
+Runge-Kutta method of higher order takes fewer steps.
+
 A W-method's order holding with any ``J`` also lets one ``J`` serve several steps, as stiff codes
 (CVODE, RADAU5) hold theirs: with ``reuse > 1`` the Jacobian is made at the start of a step
 only after ``reuse`` accepted steps with the last one (or after a jump), and is carried in the
@@ -29,10 +34,6 @@ solver state meanwhile. On one trajectory that makes an exact Jacobian (dear: on
 per state coordinate) affordable; in a ``vmap``-ped batch the choice between making it and
 holding it becomes a select, so every step makes it, and a batch wants ``reuse=1`` with a
 cheap ``J``.
-The error estimate is of third order with the exact Jacobian and of second with a stand-in, so
-the step shrinks faster with the tolerance than a second-order method's must. It suits the
-moderate tolerances (1e-3 to 1e-5) of control and learning; for tight ones an implicit
-Runge-Kutta method of higher order takes fewer steps.
 """
 
 import math
@@ -93,9 +94,8 @@ class Rosenbrock23(diffrax.AbstractAdaptiveSolver):
         f0 = terms.vf(t0, y0, args)
         if self.reuse == 1:
             return f0
-        n = ravel_pytree(y0)[0].size
-        dtype = ravel_pytree(y0)[0].dtype
-        return f0, jnp.zeros((n, n), dtype), jnp.asarray(self.reuse, jnp.int32)
+        x0, _ = ravel_pytree(y0)
+        return f0, jnp.zeros((x0.size, x0.size), x0.dtype), jnp.asarray(self.reuse, jnp.int32)
 
     def func(self, terms, t0, y0, args):
         return terms.vf(t0, y0, args)
