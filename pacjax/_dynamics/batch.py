@@ -57,9 +57,10 @@ def simulate_batch(
             least one of ``controls``, ``q0``, ``qdot0`` has a row per simulation).
         devices: local devices to split the rows over (default all); the rows are padded to a
             multiple of it.
-        rows_at_once: rows integrated as one vectorised integration (each device's rows in
-            groups of this many, one group after another). In a group every row takes as many
-            steps as the one that needs most, and a held Jacobian cannot be skipped (a
+        rows_at_once: rows integrated as one vectorised integration (groups of this many,
+            one group after another; over several devices all rows are one group). In a
+            group every row takes as many steps as the one that needs most, and a held
+            Jacobian cannot be skipped (a
             ``vmap``-ped choice computes both sides), so each group steps with the stiff
             Jacobian every step; one row at a time keeps :func:`simulate`'s solver and its own
             steps. Default: one on a CPU, where vectorising small rows saves little, and all
