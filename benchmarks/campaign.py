@@ -2,7 +2,10 @@
 can write (``tests/scene_space.py``: 1-24 segments, every strain model and per-segment mixes,
 0-20 point masses, forces and moments at arbitrary sites, tendons with 2-40 rings or channels,
 anchors anywhere, length and tension mode, gravity and base in any direction, float32 and
-float64), many value draws on each, every property checked on each draw.
+float64), many value draws on each, every property checked on each draw. Every draw is solved
+singly and as a batch; the tip's gradient through the equilibrium, ``find_equilibria`` and 10 ms
+of ``simulate`` run on a structure's first draw and then every ``--every``-th, since after their
+compilations they are what a draw's time goes to on large structures.
 
 Each structure costs its compilations (tens of seconds on 2 cores); its draws reuse them, so
 programs are compiled at LLVM's optimisation level 0 (the campaign checks properties, not
@@ -17,8 +20,8 @@ Each structure runs in a child process. A draw that gives no result within ``--d
 child that dies (an abort inside XLA, a segmentation fault, memory) is recorded as a ``crash``
 with its exit status. Either way the campaign goes on with the next structure.
 
-    python benchmarks/campaign.py --structures 200 --draws 50 [--seed 0] [--resume] [--minutes M]
-                                  [--draw-seconds S]
+    python benchmarks/campaign.py --structures 200 --draws 50 [--seed 0] [--every K] [--resume]
+                                  [--minutes M] [--draw-seconds S]
 """
 
 from __future__ import annotations
@@ -47,18 +50,29 @@ from hypothesis import strategies as st
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
-from scene_space import PropertyFailure, build, check, draw_structure, values  # noqa: E402
+from scene_space import (  # noqa: E402
+    PropertyFailure,
+    build,
+    check,
+    draw_structure,
+    is_validation_error,
+    values,
+)
 
 OUT = ROOT / "benchmarks" / "results" / "campaign.json"
-#: Beyond the single and batch solves, on every draw (each one compilation per structure).
+#: Beyond the single and batch solves (one compilation each per structure), on the draws that
+#: ``--every`` picks.
 OPERATIONS = ("gradient", "find_equilibria", "simulate")
 #: A child's line that carries a draw's record.
 _RECORD = "CAMPAIGN-RECORD "
 
 
-def run_structure(structure, draws: int, seed: int, on_draw=lambda record: None) -> list[dict]:
+def run_structure(
+    structure, draws: int, seed: int, on_draw=lambda record: None, every: int = 1
+) -> list[dict]:
     """``draws`` value draws on one structure; one record per draw, each also passed to
-    ``on_draw`` as soon as it is made."""
+    ``on_draw`` as soon as it is made. The single and batch solves run on every draw,
+    ``OPERATIONS`` on the first and then every ``every``-th."""
     records = []
 
     @settings(
@@ -74,17 +88,16 @@ def run_structure(structure, draws: int, seed: int, on_draw=lambda record: None)
         t0 = time.perf_counter()
         try:
             scene, controls = build(structure, data.draw(values(structure)))
-        except (ValueError, TypeError) as err:  # a documented validation error
-            record.update(outcome="rejected", error=str(err))
-        else:
-            try:
-                found = check(scene, controls, structure.dtype, OPERATIONS)
-                record.update(outcome="ok", **found)
-            except PropertyFailure as err:
-                record.update(outcome="property", error=str(err))
-            except Exception as err:  # noqa: BLE001 -- a crash is what the campaign looks for
-                last = traceback.format_exc().strip().splitlines()[-1]
-                record.update(outcome="crash", error=f"{type(err).__name__}: {last}")
+            further = OPERATIONS if len(records) % every == 0 else ()
+            found = check(scene, controls, structure.dtype, further)
+            record.update(outcome="ok", operations=["single", "batch", *further], **found)
+        except PropertyFailure as err:
+            record.update(outcome="property", error=str(err))
+        except Exception as err:  # noqa: BLE001 -- a crash is what the campaign looks for
+            if is_validation_error(err):
+                record.update(outcome="rejected", error=str(err))
+            else:
+                record_crash(record, err)
         record["seconds"] = time.perf_counter() - t0
         records.append(record)
         on_draw(record)
@@ -94,6 +107,12 @@ def run_structure(structure, draws: int, seed: int, on_draw=lambda record: None)
     return records
 
 
+def record_crash(record: dict, err: BaseException) -> None:
+    """Records ``err`` as a crash, with its traceback's last line."""
+    last = "".join(traceback.format_exception(err)).strip().splitlines()[-1]
+    record.update(outcome="crash", error=f"{type(err).__name__}: {last}")
+
+
 def structures_of(n_structures: int, seed: int) -> list:
     """The campaign's structures (the same in the parent and in every child)."""
     rng = np.random.default_rng(seed)
@@ -101,12 +120,13 @@ def structures_of(n_structures: int, seed: int) -> list:
 
 
 def run_child(k: int, describe: str, plan: tuple, draw_seconds: float, on_draw) -> None:
-    """Structure ``k`` of the campaign ``plan = (structures, draws, seed)`` in a child process,
+    """Structure ``k`` of the campaign ``plan = (structures, draws, seed, every)`` in a child
+    process,
     each draw's record passed to ``on_draw`` as it comes; a ``hang`` or ``crash`` record where
     the child gives none within ``draw_seconds`` or dies."""
-    n_structures, draws, seed = plan
+    n_structures, draws, seed, every = plan
     command = [sys.executable, __file__, "--child", str(k), "--structures", str(n_structures)]
-    command += ["--draws", str(draws), "--seed", str(seed)]
+    command += ["--draws", str(draws), "--seed", str(seed), "--every", str(every)]
     proc = subprocess.Popen(command, stdout=subprocess.PIPE, text=True)
     lines: queue.Queue = queue.Queue()
 
@@ -141,7 +161,7 @@ def _failed(describe: str, outcome: str, error: str) -> dict:
     return {"structure": describe, "outcome": outcome, "error": error, "seconds": None}
 
 
-def child(k: int, n_structures: int, draws: int, seed: int) -> None:
+def child(k: int, n_structures: int, draws: int, seed: int, every: int) -> None:
     """Runs structure ``k``; one ``_RECORD`` line per draw on stdout."""
     warnings.simplefilter("ignore")
     structure = structures_of(n_structures, seed)[k]
@@ -149,7 +169,7 @@ def child(k: int, n_structures: int, draws: int, seed: int) -> None:
     def emit(record):
         print(_RECORD + json.dumps(record), flush=True)
 
-    run_structure(structure, draws, seed + k, emit)
+    run_structure(structure, draws, seed + k, emit, every)
 
 
 def main(
@@ -160,6 +180,7 @@ def main(
     minutes: float | None,
     draw_seconds: float = 900.0,
     out: Path = OUT,
+    every: int = 1,
 ) -> dict:
     done = json.loads(out.read_text()) if resume and out.exists() else None
     records = done["records"] if done else []
@@ -179,6 +200,7 @@ def main(
             "seed": seed,
             "structures_planned": n_structures,
             "draws_per_structure": draws,
+            "operations_every": every,
             "structures_done": structures_done,
             "draws": len(records),
             "tally": dict(Counter(r["outcome"] for r in records)),
@@ -200,7 +222,9 @@ def main(
             records.append(record)
             save(k)
 
-        run_child(k, structures[k].describe(), (n_structures, draws, seed), draw_seconds, on_draw)
+        run_child(
+            k, structures[k].describe(), (n_structures, draws, seed, every), draw_seconds, on_draw
+        )
         result = save(k + 1)
         print(f"{k + 1}/{n_structures} {structures[k].describe()}: {result['tally']}", flush=True)
     return result
@@ -211,6 +235,12 @@ if __name__ == "__main__":
     parser.add_argument("--structures", type=int, default=200)
     parser.add_argument("--draws", type=int, default=50)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument(
+        "--every",
+        type=int,
+        default=1,
+        help="the gradient, find_equilibria and simulate on the first draw and every k-th",
+    )
     parser.add_argument("--resume", action="store_true")
     parser.add_argument("--minutes", type=float, help="start no structure after this time")
     parser.add_argument(
@@ -223,7 +253,7 @@ if __name__ == "__main__":
     parser.add_argument("--child", type=int, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.child is not None:
-        child(args.child, args.structures, args.draws, args.seed)
+        child(args.child, args.structures, args.draws, args.seed, args.every)
     else:
         main(
             args.structures,
@@ -233,4 +263,5 @@ if __name__ == "__main__":
             args.minutes,
             args.draw_seconds,
             args.out,
+            args.every,
         )

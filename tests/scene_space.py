@@ -21,6 +21,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
+import traceback
 
 import equinox as eqx
 import jax
@@ -226,6 +228,19 @@ class PropertyFailure(AssertionError):
     """A solve broke one of the campaign's properties."""
 
 
+_PACJAX = os.path.dirname(pj.__file__)
+
+
+def is_validation_error(err: BaseException) -> bool:
+    """A documented validation error: a ``ValueError`` or ``TypeError`` that pacjax's own code
+    raised (its innermost frame is in the package), as a check of the inputs does before any
+    compilation; one raised inside JAX or NumPy (a shape mismatch in a trace) is a crash."""
+    if not isinstance(err, (ValueError, TypeError)) or err.__traceback__ is None:
+        return False
+    innermost = traceback.extract_tb(err.__traceback__)[-1].filename
+    return os.path.abspath(innermost).startswith(_PACJAX + os.sep)
+
+
 def _require(ok: bool, what: str) -> None:
     if not ok:
         raise PropertyFailure(what)
@@ -299,6 +314,14 @@ def check(
     if "simulate" in operations and all(
         float(seg.linear_density) > 0 for seg in scene.robot.segments
     ):
+        out["simulate"] = _simulate(scene, controls)
+    return out
+
+
+def _simulate(scene, controls) -> str:
+    """10 ms of motion: its result code, or the validation error of a scene that cannot move
+    (a segment too light for its mass matrix to be factorised)."""
+    try:
         # A few thousand steps bound a draw's time; beyond them the result code says so.
         motion = pj.simulate(
             scene,
@@ -307,12 +330,13 @@ def check(
             saveat=np.linspace(0.0, 0.01, 3),
             max_steps=SIMULATE_MAX_STEPS,
         )
-        if bool(motion.successful):
-            _require(
-                np.all(np.isfinite(np.asarray(motion.q))), "simulate: non-finite q, successful"
-            )
-        out["simulate"] = pj.RESULTS[motion.result] or "successful"
-    return out
+    except (ValueError, TypeError) as err:
+        if not is_validation_error(err):
+            raise
+        return f"rejected: {err}"
+    if bool(motion.successful):
+        _require(np.all(np.isfinite(np.asarray(motion.q))), "simulate: non-finite q, successful")
+    return pj.RESULTS[motion.result] or "successful"
 
 
 def _tip_gradient(scene, controls):

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from scene_space import Structure, build, check, values
+from scene_space import PropertyFailure, Structure, build, check, is_validation_error, values
 
 #: Small structures (each one compilation) that still cross the space: a mixed PAC/PCC robot
 #: with masses at odd counts, ring and channel tendons in both modes and a follower force; an
@@ -112,3 +112,19 @@ def test_found_a_segment_too_light_to_simulate_says_so():
     scene = pj.Scene(pj.Robot(segments), pj.PCC())
     with pytest.raises(ValueError, match="linear_density .* is too small to simulate"):
         pj.simulate(scene, (0.0, 0.01))
+
+
+def test_a_validation_error_is_told_from_a_crash():
+    """The campaign's line between a documented validation error (pacjax refusing an input) and
+    a crash (an exception from inside JAX, as the knot-layout bug raised from ``einsum``)."""
+    import jax.numpy as jnp
+
+    import pacjax as pj
+
+    with pytest.raises(ValueError) as refused:
+        pj.Segment(-1.0, 0.1, 100.0)
+    assert is_validation_error(refused.value)
+    with pytest.raises(ValueError) as crashed:
+        jnp.einsum("ij,jk->ik", jnp.ones((2, 3)), jnp.ones((4, 2)))
+    assert not is_validation_error(crashed.value)
+    assert not is_validation_error(PropertyFailure("a broken property"))
