@@ -10,7 +10,8 @@ compilations they are what a draw's time goes to on large structures.
 Each structure costs its compilations (tens of seconds on 2 cores); its draws reuse them, so
 programs are compiled at LLVM's optimisation level 0 (the campaign checks properties, not
 speed; ``XLA_FLAGS`` setting a level stands). Every draw is recorded (structure, result code,
-any broken property or exception with its traceback's last line) in
+any broken property or exception with its traceback's last line, and the drawn values of any
+draw that did not end in a successful single solve) in
 ``benchmarks/results/campaign.json``, rewritten after every draw so that an interrupted run keeps
 what it did; ``--resume`` continues one at its next structure, and ``--minutes`` stops a run
 after its last structure that started within that time.
@@ -125,6 +126,8 @@ def run_structure(structure, k: int, plan: Plan, on_draw=lambda record: None) ->
             else:
                 record_crash(record, err)
         record["seconds"] = time.perf_counter() - t0
+        if record["outcome"] != "ok" or record.get("single") != "successful":
+            record["values"] = drawn  # to rebuild the scene: build(structure, values)
         records.append(record)
         on_draw(record)
 
