@@ -12,12 +12,11 @@ from jax.flatten_util import ravel_pytree
 import pacjax as pj
 from pacjax._dynamics.equations import (
     EquationsOfMotion,
-    difference_jacobian,
     plane_angle_weights,
     vector_field,
     vector_field_jacobian,
 )
-from pacjax._dynamics.rosenbrock import Rosenbrock23
+from pacjax._dynamics.rosenbrock import Rosenbrock23, forward_differences
 from pacjax._model.inertia import mass_matrix
 from pacjax._model.inputs import as_traced_leaves
 
@@ -43,8 +42,8 @@ def _end_error(jacobian, n_steps: int, reference) -> float:
 
 @pytest.mark.parametrize(
     "jacobian",
-    [None, lambda t, y, args: 0.8 * A, lambda t, y, args: jnp.diag(jnp.diag(A))],
-    ids=["exact", "scaled", "diagonal"],
+    [None, "differences", lambda t, y, args: 0.8 * A, lambda t, y, args: jnp.diag(jnp.diag(A))],
+    ids=["exact", "differences", "scaled", "diagonal"],
 )
 def test_second_order_with_any_jacobian(jacobian):
     """A W-method: halving the step quarters the error whatever matrix stands in for the
@@ -92,6 +91,7 @@ def test_stiff_van_der_pol_matches_kvaerno5():
     solvers = (
         ("ros", Rosenbrock23()),
         ("ros_autonomous", Rosenbrock23(autonomous=True)),
+        ("ros_differences", Rosenbrock23(jacobian="differences", reuse=5)),
         ("kv5", diffrax.Kvaerno5()),
     )
     for name, solver in solvers:
@@ -111,6 +111,8 @@ def test_stiff_van_der_pol_matches_kvaerno5():
         ys[name] = (sol.ys[0], jax.vmap(sol.evaluate)(ts + 0.5)[0])
     np.testing.assert_allclose(ys["ros"][0], ys["kv5"][0], atol=2e-4)
     np.testing.assert_allclose(ys["ros"][1], ys["kv5"][1], atol=2e-4)
+    np.testing.assert_allclose(ys["ros_differences"][0], ys["kv5"][0], atol=2e-4)
+    np.testing.assert_allclose(ys["ros_differences"][1], ys["kv5"][1], atol=2e-4)
     # The problem is autonomous: leaving out T (exactly zero) changes no step.
     np.testing.assert_array_equal(ys["ros_autonomous"][0], ys["ros"][0])
     np.testing.assert_array_equal(ys["ros_autonomous"][1], ys["ros"][1])
@@ -141,6 +143,8 @@ def test_held_jacobian_serves_several_steps():
     np.testing.assert_allclose(sols[5].ys[0], sols[1].ys[0], atol=1e-3)
     with pytest.raises(ValueError, match="reuse"):
         Rosenbrock23(reuse=0)
+    with pytest.raises(ValueError, match="jacobian"):
+        Rosenbrock23(jacobian="finite")
 
 
 def test_error_weight_scales_the_error_estimate():
@@ -170,7 +174,7 @@ def test_gradient_through_adaptive_steps_matches_finite_differences():
     assert abs(grad - fd) < 1e-6 * abs(fd)
 
 
-def test_difference_jacobian_is_the_vector_fields():
+def test_forward_differences_are_the_vector_fields_jacobian():
     """The held exact Jacobian by forward differences equals ``jax.jacfwd`` of the vector
     field, in motion with the tendons taut, to the differences' truncation (a few 1e-5 of the
     largest entries, the tendon springs')."""
@@ -179,9 +183,13 @@ def test_difference_jacobian_is_the_vector_fields():
     n = scene.n_dofs
     y = (jnp.linspace(0.2, -0.3, n).at[-1].set(-0.002), jnp.linspace(-1.0, 2.0, n))
     args = (model, CONTROLS + 0.004)
-    differences = jax.jit(difference_jacobian)(0.0, y, args)
     x0, unravel = ravel_pytree(y)
-    exact = jax.jit(jax.jacfwd(lambda x: ravel_pytree(vector_field(0.0, unravel(x), args))[0]))(x0)
+
+    def f(x):
+        return ravel_pytree(vector_field(0.0, unravel(x), args))[0]
+
+    differences = jax.jit(lambda x: forward_differences(f, x, f(x)))(x0)
+    exact = jax.jit(jax.jacfwd(f))(x0)
     scale = float(jnp.abs(exact).max())
     np.testing.assert_allclose(differences, exact, rtol=1e-4, atol=1e-6 * scale)
 

@@ -1,6 +1,6 @@
 """The equations of motion: the paper's full model (its eq. 7) as a vector field, its Jacobian
-(exact, by differences, or with the inertia held) and the weights its coordinates' errors take,
-for :mod:`pacjax._dynamics.simulate`.
+with the inertia held, and the weights its coordinates' errors take, for
+:mod:`pacjax._dynamics.simulate`.
 
     M(q) qddot + C(q, qdot) qdot + G(q) + D qdot + K(q) = A(q) f_act + Q_ext(q)
 
@@ -31,7 +31,6 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import lineax as lx
-from jax.flatten_util import ravel_pytree
 from jaxtyping import Array, Float
 
 from .._config import MATMUL_PRECISION
@@ -284,31 +283,6 @@ def vector_field_jacobian(t, y, args):
     q, qdot = y
     u, udot = control_fn(controls, model.scene.n_tendons, q.dtype)(t)
     return model.stiff_jacobian(q, qdot, u, udot)
-
-
-def difference_jacobian(t, y, args):
-    """The exact Jacobian of :func:`vector_field` along the flattened state ``(q, qdot)``, by
-    forward differences, one state coordinate at a time.
-
-    Exact up to the differences' truncation (about the square root of the machine epsilon,
-    relative), which a W-method does not feel. One vector field per coordinate in a loop: the
-    program holds one more copy of the vector field, where ``jax.jacfwd`` traces its forward
-    derivative (a program several times larger, compiled for seconds longer, at about the same
-    cost on CPU: every coordinate's derivative costs about a vector field either way).
-    """
-    x0, unravel = ravel_pytree(y)
-
-    def f(x):
-        return ravel_pytree(vector_field(t, unravel(x), args))[0]
-
-    f0 = f(x0)
-    steps = jnp.sqrt(jnp.finfo(x0.dtype).eps) * jnp.maximum(jnp.abs(x0), 1.0)
-
-    def column(j):
-        step = steps[j]
-        return (f(x0.at[j].add(step)) - f0) / step
-
-    return jax.lax.map(column, jnp.arange(x0.size)).T
 
 
 def plane_angle_weights(y, args):

@@ -57,6 +57,8 @@ class Rosenbrock23(diffrax.AbstractAdaptiveSolver):
         jacobian: ``(t, y, args) -> J``, the ``(n, n)`` Jacobian (or a W-method's stand-in for
             it) of the vector field along the flattened state (``jax.flatten_util.ravel_pytree``
             order). None: the exact one, by forward-mode differentiation of the vector field.
+            ``"differences"``: the exact one by forward differences
+            (:func:`forward_differences`), one vector field per state coordinate.
         autonomous: the vector field does not depend on ``t`` (constant controls), so ``T`` is
             zero. Its forward derivative in ``t`` is then left out: it traced the whole vector
             field once more per step.
@@ -72,12 +74,17 @@ class Rosenbrock23(diffrax.AbstractAdaptiveSolver):
     interpolation_cls: ClassVar[Callable[..., diffrax.ThirdOrderHermitePolynomialInterpolation]] = (
         diffrax.ThirdOrderHermitePolynomialInterpolation
     )
-    jacobian: Callable | None = eqx.field(static=True, default=None)
+    jacobian: Callable | str | None = eqx.field(static=True, default=None)
     autonomous: bool = eqx.field(static=True, default=False)
     reuse: int = eqx.field(static=True, default=1)
     error_weight: Callable | None = eqx.field(static=True, default=None)
 
     def __check_init__(self):
+        if isinstance(self.jacobian, str) and self.jacobian != "differences":
+            raise ValueError(
+                f'Rosenbrock23.jacobian must be callable, None or "differences", '
+                f"got {self.jacobian!r}"
+            )
         if not (isinstance(self.reuse, int) and self.reuse >= 1):
             raise ValueError(f"Rosenbrock23.reuse must be an integer >= 1, got {self.reuse!r}")
 
@@ -100,10 +107,12 @@ class Rosenbrock23(diffrax.AbstractAdaptiveSolver):
     def func(self, terms, t0, y0, args):
         return terms.vf(t0, y0, args)
 
-    def _jacobian(self, t, y, args, f):
+    def _jacobian(self, t, y, args, f, f0):
         x, _ = ravel_pytree(y)
         if self.jacobian is None:
             return jax.jacfwd(lambda z: f(t, z))(x)
+        if self.jacobian == "differences":
+            return forward_differences(lambda z: f(t, z), x, f0)
         return self.jacobian(t, y, args)
 
     def step(self, terms, t0, t1, y0, args, solver_state, made_jump):
@@ -121,10 +130,10 @@ class Rosenbrock23(diffrax.AbstractAdaptiveSolver):
         f0 = ravel_pytree(f0_tree)[0]
         h = t1 - t0
         if held is None:
-            jac = self._jacobian(t0, y0, args, f)
+            jac = self._jacobian(t0, y0, args, f, f0)
         else:
             fresh = (age >= self.reuse) | jnp.asarray(made_jump)
-            jac = jax.lax.cond(fresh, lambda: self._jacobian(t0, y0, args, f), lambda: held)
+            jac = jax.lax.cond(fresh, lambda: self._jacobian(t0, y0, args, f, f0), lambda: held)
             age = jnp.where(fresh, 0, age) + 1
         # Neither W nor T carry gradients: the step's derivative is that of the method with W
         # held fixed, a W-method's own (diffrax's implicit solvers stop them the same way).
@@ -141,12 +150,22 @@ class Rosenbrock23(diffrax.AbstractAdaptiveSolver):
 
         hdt = (h * _D) * rate
         k1 = solve(f0 + hdt)
-        f1 = f(t0 + 0.5 * h, x0 + (0.5 * h) * k1)
-        k2 = solve(f1 - k1) + k1
+
+        def stage(carry, second):
+            # The two new vector fields as one loop of two: the program then holds one copy
+            # of the vector field for them, which halves what XLA compiles for the stages.
+            k2, f1 = carry
+            x = x0 + jnp.where(second, h * k2, (0.5 * h) * k1)
+            fx = f(t0 + jnp.where(second, 1.0, 0.5) * h, x)
+            rhs = jnp.where(second, fx - _E32 * (k2 - f1) - 2.0 * (k1 - f0) + hdt, fx - k1)
+            k = solve(rhs)
+            return (jnp.where(second, k2, k + k1), jnp.where(second, f1, fx)), (k, fx)
+
+        zero = jnp.zeros_like(x0)
+        (k2, _), (ks, fs) = jax.lax.scan(stage, (zero, zero), jnp.array([False, True]))
+        k3, f2 = ks[1], fs[1]
         x1 = x0 + h * k2
-        f2_tree = terms.vf(t1, unravel(x1), args)
-        f2 = ravel_pytree(f2_tree)[0]
-        k3 = solve(f2 - _E32 * (k2 - f1) - 2.0 * (k1 - f0) + hdt)
+        f2_tree = unravel(f2)
         error = unravel((h / 6.0) * (k1 - 2.0 * k2 + k3))
         if self.error_weight is not None:
             weight = jax.lax.stop_gradient(self.error_weight(y0, args))
@@ -155,3 +174,20 @@ class Rosenbrock23(diffrax.AbstractAdaptiveSolver):
         dense_info = dict(y0=y0, y1=y1, k0=unravel(h * f0), k1=unravel(h * f2))
         state = f2_tree if held is None else (f2_tree, jac, age)
         return y1, error, dense_info, state, diffrax.RESULTS.successful
+
+
+def forward_differences(f: Callable, x: jax.Array, fx: jax.Array) -> jax.Array:
+    """The Jacobian of ``f`` at ``x`` (where it is ``fx``) by forward differences, one coordinate
+    at a time (a ``lax.map``: the program holds one more copy of ``f``, where ``jax.jacfwd``
+    traces its forward derivative, a larger program that compiles for longer).
+
+    Each coordinate's step is the square root of the machine epsilon times its size (at
+    least one), so the truncation is about that relative to the Jacobian's entries; a W-method
+    does not feel it.
+    """
+    steps = jnp.sqrt(jnp.finfo(x.dtype).eps) * jnp.maximum(jnp.abs(x), 1.0)
+
+    def column(j):
+        return (f(x.at[j].add(steps[j])) - fx) / steps[j]
+
+    return jax.lax.map(column, jnp.arange(x.size)).T

@@ -46,7 +46,6 @@ from .._statics.problem import ScaledProblem
 from .damping import Damping
 from .equations import (
     EquationsOfMotion,
-    difference_jacobian,
     plane_angle_weights,
     vector_field,
     vector_field_jacobian,
@@ -339,7 +338,7 @@ def rosenbrock23(jacobian: str = "exact", reuse: int | None = None) -> Rosenbroc
 
     Args:
         jacobian: ``"exact"``: the vector field's Jacobian by differences
-            (:func:`pacjax._dynamics.equations.difference_jacobian`), one per ``reuse``
+            (:func:`pacjax._dynamics.rosenbrock.forward_differences`), one per ``reuse``
             accepted steps (default :data:`JACOBIAN_REUSE`): dear (a vector field per state
             coordinate) but it holds the inertia's fast part, so the steps are several times
             fewer. ``"stiff"``: :meth:`EquationsOfMotion.stiff_jacobian`, the forces'
@@ -352,7 +351,7 @@ def rosenbrock23(jacobian: str = "exact", reuse: int | None = None) -> Rosenbroc
     (:func:`pacjax._dynamics.equations.plane_angle_weights`).
     """
     if jacobian == "exact":
-        function, default_reuse = difference_jacobian, JACOBIAN_REUSE
+        function, default_reuse = "differences", JACOBIAN_REUSE
     elif jacobian == "stiff":
         function, default_reuse = vector_field_jacobian, 1
     else:
