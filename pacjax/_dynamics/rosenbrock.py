@@ -152,8 +152,8 @@ class Rosenbrock23(diffrax.AbstractAdaptiveSolver):
         k1 = solve(f0 + hdt)
 
         def stage(carry, second):
-            # The two new vector fields as one loop of two: the program then holds one copy
-            # of the vector field for them, which halves what XLA compiles for the stages.
+            # The two new vector fields as one loop of two, so that the compiled program holds
+            # one copy of the vector field for them, not two: XLA compiles each copy anew.
             k2, f1 = carry
             x = x0 + jnp.where(second, h * k2, (0.5 * h) * k1)
             fx = f(t0 + jnp.where(second, 1.0, 0.5) * h, x)
