@@ -17,12 +17,14 @@ what it did; ``--resume`` continues one at its next structure, and ``--minutes``
 after its last structure that started within that time.
 
 Each structure runs in a child process. A draw that gives no result within ``--draw-seconds``
-(its structure's compilations included) is recorded as a ``hang`` and the child is killed; a
+(``--first-draw-seconds`` for a structure's first, which compiles every program) is recorded as
+a ``hang``, with the operation it was in, and the child is killed; a
 child that dies (an abort inside XLA, a segmentation fault, memory) is recorded as a ``crash``
 with its exit status. Either way the campaign goes on with the next structure.
 
     python benchmarks/campaign.py --structures 200 --draws 50 [--seed 0] [--every K]
-        [--structure-seconds T] [--shard i/n] [--resume] [--minutes M] [--draw-seconds S]
+        [--structure-seconds T] [--shard i/n] [--resume] [--minutes M]
+        [--first-draw-seconds S] [--draw-seconds S]
 
 A structure's warm single and batch solves take tens of milliseconds where its compilations take
 minutes, so a campaign of many scenes draws many values on each structure, up to ``--draws``
@@ -72,6 +74,8 @@ OUT = ROOT / "benchmarks" / "results" / "campaign.json"
 OPERATIONS = ("gradient", "find_equilibria", "simulate")
 #: A child's line that carries a draw's record.
 _RECORD = "CAMPAIGN-RECORD "
+#: A child's line that names the operation a draw starts.
+_OPERATION = "CAMPAIGN-OPERATION "
 
 
 @dataclasses.dataclass(frozen=True)
@@ -90,9 +94,16 @@ class Plan:
     shards: int = 1
 
 
-def run_structure(structure, k: int, plan: Plan, on_draw=lambda record: None) -> list[dict]:
+def run_structure(
+    structure,
+    k: int,
+    plan: Plan,
+    on_draw=lambda record: None,
+    on_operation=lambda name: None,
+) -> list[dict]:
     """The value draws of structure ``k``; one record per draw, each also passed to
-    ``on_draw`` as soon as it is made. The single and batch solves run on every draw."""
+    ``on_draw`` as soon as it is made (and each operation's name to ``on_operation`` as it
+    starts). The single and batch solves run on every draw."""
     records = []
     t_start = time.perf_counter()
 
@@ -116,7 +127,7 @@ def run_structure(structure, k: int, plan: Plan, on_draw=lambda record: None) ->
         try:
             scene, controls = build(structure, drawn)
             further = OPERATIONS if len(records) % plan.every == 0 else ()
-            found = check(scene, controls, structure.dtype, further)
+            found = check(scene, controls, structure.dtype, further, on_operation)
             record.update(outcome="ok", operations=["single", "batch", *further], **found)
         except PropertyFailure as err:
             record.update(outcome="property", error=str(err))
@@ -148,10 +159,11 @@ def structures_of(n_structures: int, seed: int) -> list:
     return [draw_structure(rng) for _ in range(n_structures)]
 
 
-def run_child(k: int, describe: str, plan: Plan, draw_seconds: float, on_draw) -> None:
+def run_child(k: int, describe: str, plan: Plan, limits: tuple[float, float], on_draw) -> None:
     """Structure ``k`` of the campaign ``plan`` in a child process, each draw's record passed to
-    ``on_draw`` as it comes; a ``hang`` or ``crash`` record where the child gives none within
-    ``draw_seconds`` or dies."""
+    ``on_draw`` as it comes; a ``hang`` record (naming the operation it was in) where the child
+    gives none within ``limits`` (seconds for the first draw, with every compilation, and for
+    each later one), a ``crash`` record where it dies."""
     command = [sys.executable, __file__, "--child", str(k), "--plan"]
     command.append(json.dumps(dataclasses.asdict(plan)))
     proc = subprocess.Popen(command, stdout=subprocess.PIPE, text=True)
@@ -163,21 +175,27 @@ def run_child(k: int, describe: str, plan: Plan, draw_seconds: float, on_draw) -
         lines.put(None)
 
     threading.Thread(target=read, daemon=True).start()
-    given, deadline = 0, time.perf_counter() + draw_seconds
+    given, operation = 0, "starting"
+    limit = limits[0]
+    deadline = time.perf_counter() + limit
     while True:
         try:
             line = lines.get(timeout=max(deadline - time.perf_counter(), 0.0))
         except queue.Empty:
             proc.kill()
             proc.wait()
-            on_draw(_failed(describe, "hang", f"draw {given}: no result in {draw_seconds:g} s"))
+            what = f"draw {given}: no result in {limit:g} s, in {operation}"
+            on_draw(_failed(describe, "hang", what))
             return
         if line is None:
             break
-        if line.startswith(_RECORD):
+        if line.startswith(_OPERATION):
+            operation = line[len(_OPERATION) :].strip()
+        elif line.startswith(_RECORD):
             given += 1
             on_draw(json.loads(line[len(_RECORD) :]))
-            deadline = time.perf_counter() + draw_seconds
+            limit = limits[1]
+            deadline = time.perf_counter() + limit
     status = proc.wait()
     if status != 0:
         on_draw(_failed(describe, "crash", f"draw {given}: the process ended with status {status}"))
@@ -196,14 +214,17 @@ def child(k: int, plan: Plan) -> None:
     def emit(record):
         print(_RECORD + json.dumps(record), flush=True)
 
-    run_structure(structure, k, plan, emit)
+    def started(name):
+        print(_OPERATION + name, flush=True)
+
+    run_structure(structure, k, plan, emit, started)
 
 
 def main(
     plan: Plan,
     resume: bool,
     minutes: float | None,
-    draw_seconds: float = 900.0,
+    limits: tuple[float, float] = (3600.0, 900.0),
     out: Path = OUT,
 ) -> dict:
     done = json.loads(out.read_text()) if resume and out.exists() else None
@@ -226,7 +247,7 @@ def main(
             "draws": len(records),
             "tally": dict(Counter(r["outcome"] for r in records)),
             "results": dict(Counter(r.get("single", "-") for r in records)),
-            "draw_seconds_limit": draw_seconds,
+            "draw_seconds_limits": list(limits),
             "wall_s": previous_wall + time.perf_counter() - t0,
             "records": records,
         }
@@ -245,7 +266,7 @@ def main(
             records.append(record)
             save(k)
 
-        run_child(k, structures[k].describe(), plan, draw_seconds, on_draw)
+        run_child(k, structures[k].describe(), plan, limits, on_draw)
         result = save(k + 1)
         print(
             f"{k + 1}/{plan.structures} {structures[k].describe()}: {result['tally']}", flush=True
@@ -273,10 +294,16 @@ if __name__ == "__main__":
     parser.add_argument("--resume", action="store_true")
     parser.add_argument("--minutes", type=float, help="start no structure after this time")
     parser.add_argument(
+        "--first-draw-seconds",
+        type=float,
+        default=3600.0,
+        help="a structure's first draw (with its compilations) that takes longer is a hang",
+    )
+    parser.add_argument(
         "--draw-seconds",
         type=float,
         default=900.0,
-        help="a draw (with its structure's compilations) that takes longer is a hang",
+        help="a later draw that takes longer is a hang",
     )
     parser.add_argument("--out", type=Path, default=OUT, help="the record (JSON)")
     parser.add_argument("--child", type=int, help=argparse.SUPPRESS)
@@ -297,4 +324,5 @@ if __name__ == "__main__":
             shard,
             shards,
         )
-        main(plan, args.resume, args.minutes, args.draw_seconds, args.out)
+        limits = (args.first_draw_seconds, args.draw_seconds)
+        main(plan, args.resume, args.minutes, limits, args.out)

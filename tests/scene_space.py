@@ -276,17 +276,24 @@ SIMULATE_MAX_STEPS = 5_000
 
 
 def check(
-    scene: pj.Scene, controls: np.ndarray, dtype: str, operations: tuple[str, ...] = ()
+    scene: pj.Scene,
+    controls: np.ndarray,
+    dtype: str,
+    operations: tuple[str, ...] = (),
+    on_operation=lambda name: None,
 ) -> dict:
     """Solve ``scene`` singly and as a batch, and run the further ``operations`` (any of
     ``"gradient"``: the tip differentiated through the equilibrium; ``"find_equilibria"``: four
     starts; ``"simulate"``: 10 ms of motion, at most ``SIMULATE_MAX_STEPS`` steps); raise
     :class:`PropertyFailure` on a broken property. Returns what happened (result codes) for
-    the campaign's tally."""
+    the campaign's tally. ``on_operation`` is told the name of each operation as it starts (a
+    campaign that finds a draw hanging says in what)."""
     tol = TOLS[dtype]
+    on_operation("single")
     single = pj.solve_equilibrium(scene, controls, fallback=False)
     _check_result(single, scene, tol, "solve_equilibrium")
     rows = np.stack([controls, 0.5 * controls])
+    on_operation("batch")
     batch = pj.solve_batch(scene, rows, fallback=False, progress=False)
     first = jax.tree.map(lambda x: x[0], batch)
     for i in range(2):
@@ -304,9 +311,11 @@ def check(
         )
     out = {"single": pj.RESULTS[single.result] or "successful"}
     if "gradient" in operations and scene.n_tendons and bool(single.successful):
+        on_operation("gradient")
         grad = _tip_gradient(scene, jnp.asarray(controls, single.q.dtype))
         _require(np.all(np.isfinite(grad)), "non-finite gradient of the tip by the controls")
     if "find_equilibria" in operations:
+        on_operation("find_equilibria")
         found = pj.find_equilibria(scene, controls, n_starts=4, fallback=False)
         for i in range(len(found)):
             _check_result(found[i], scene, tol, f"find_equilibria[{i}]")
@@ -314,6 +323,7 @@ def check(
     if "simulate" in operations and all(
         float(seg.linear_density) > 0 for seg in scene.robot.segments
     ):
+        on_operation("simulate")
         out["simulate"] = _simulate(scene, controls)
     return out
 
