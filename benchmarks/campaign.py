@@ -148,9 +148,11 @@ def run_structure(
 
 
 def record_crash(record: dict, err: BaseException) -> None:
-    """Records ``err`` as a crash, with its traceback's last line."""
-    last = "".join(traceback.format_exception(err)).strip().splitlines()[-1]
-    record.update(outcome="crash", error=f"{type(err).__name__}: {last}")
+    """Records ``err`` as a crash: its message's first line and where it was raised."""
+    lines = str(err).strip().splitlines() or [""]
+    where = traceback.extract_tb(err.__traceback__)[-1] if err.__traceback__ else None
+    at = f" (at {where.filename}:{where.lineno})" if where else ""
+    record.update(outcome="crash", error=f"{type(err).__name__}: {lines[0]}{at}")
 
 
 def structures_of(n_structures: int, seed: int) -> list:

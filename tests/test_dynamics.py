@@ -194,3 +194,15 @@ def test_input_validation():
         pj.simulate(SCENE, (0.0, 1.0), damping=pj.Damping(tendon=jnp.ones(3)))
     with pytest.raises(TypeError, match="damping"):
         pj.simulate(SCENE, (0.0, 1.0), damping=0.1)
+
+
+@pytest.mark.parametrize("damping", [None, pj.Damping(stiffness=1e-3)], ids=["modal", "given"])
+def test_a_float32_scene_simulates_in_float32(damping):
+    """Found by the campaign: ``Damping()``'s zero mass coefficient was a float64 array, which
+    promoted a float32 scene's forces to float64, and lineax refused to solve them with the
+    float32 mass matrix (the default damping and a given one alike)."""
+    scene = pj.astype(small_scene(order=0, quadrature_points=2), jnp.float32)
+    traj = pj.simulate(scene, (0.0, 0.005), CONTROLS, damping=damping, rtol=1e-3, atol=1e-5)
+    assert bool(traj.successful)
+    assert traj.q.dtype == jnp.float32
+    assert np.all(np.isfinite(np.asarray(traj.q)))

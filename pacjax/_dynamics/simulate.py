@@ -215,7 +215,7 @@ def prepare(
     # Known point-mass sites become knots of the kinematics (as in the statics): a traced site
     # integrates its own frame in every kinematics pass, and the vector field has several.
     scene = static_load_sites(as_traced_leaves(scene, dtype))
-    damping = _check_damping(scene, damping)
+    damping = _check_damping(scene, damping, dtype)
     opts = _Options(
         solver=default_solver(rtol) if solver is None else solver,
         rtol=float(rtol),
@@ -260,10 +260,12 @@ def check_simulation_controls(scene: Scene, controls, t0: float, dtype):
     return controls
 
 
-def _check_damping(scene: Scene, damping) -> Damping:
-    """The given damping, or the default modal one (5 % on the lowest mode)."""
+def _check_damping(scene: Scene, damping, dtype) -> Damping:
+    """The given damping, or the default modal one (5 % on the lowest mode), in the solver's
+    precision: a float64 coefficient (``Damping()``'s zero mass term is one) would promote a
+    float32 scene's forces to float64, which its float32 mass matrix cannot solve."""
     if damping is None:
-        return Damping.modal(scene)
+        damping = Damping.modal(scene)
     if not isinstance(damping, Damping):
         raise TypeError(f"damping must be a pacjax.Damping, got {type(damping).__name__}")
     if damping.tendon is not None and jnp.ndim(damping.tendon) == 1:
@@ -271,7 +273,7 @@ def _check_damping(scene: Scene, damping) -> Damping:
             raise ValueError(
                 f"Damping.tendon must have shape ({scene.n_tendons},), got {damping.tendon.shape}"
             )
-    return damping
+    return jax.tree.map(lambda x: x.astype(dtype) if eqx.is_inexact_array(x) else x, damping)
 
 
 @eqx.filter_jit
