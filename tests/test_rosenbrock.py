@@ -174,6 +174,7 @@ def test_gradient_through_adaptive_steps_matches_finite_differences():
     assert abs(grad - fd) < 1e-6 * abs(fd)
 
 
+@pytest.mark.slow  # jax.jacfwd of the whole vector field compiles for tens of seconds
 def test_forward_differences_are_the_vector_fields_jacobian():
     """The held exact Jacobian by forward differences equals ``jax.jacfwd`` of the vector
     field, in motion with the tendons taut, to the differences' truncation (a few 1e-5 of the
