@@ -7,10 +7,10 @@ singly and as a batch; the tip's gradient through the equilibrium, ``find_equili
 of ``simulate`` run on a structure's first draw and then every ``--every``-th, since after their
 compilations they are what a draw's time goes to on large structures.
 
-Each structure costs its compilations (tens of seconds on 2 cores); its draws reuse them, so
+Each structure costs its compilations (seconds to minutes on 2 cores); its draws reuse them, so
 programs are compiled at LLVM's optimisation level 0 (the campaign checks properties, not
 speed; ``XLA_FLAGS`` setting a level stands). Every draw is recorded (structure, result code,
-any broken property or exception with its traceback's last line, and the drawn values of any
+any broken property, a crash's message and where it was raised, and the drawn values of any
 draw that did not end in a successful single solve) in
 ``benchmarks/results/campaign.json``, rewritten after every draw so that an interrupted run keeps
 what it did; ``--resume`` continues one at its next structure, and ``--minutes`` stops a run
