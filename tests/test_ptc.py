@@ -174,3 +174,23 @@ def test_pac_tentacle_takes_newtons_steps_from_a_long_first_step():
     np.testing.assert_allclose(np.asarray(eq.q), np.asarray(short.q), atol=1e-8)
     assert int(np.max(eq.steps)) <= 6, np.asarray(eq.steps)
     assert int(np.min(short.steps)) >= 7, np.asarray(short.steps)
+
+
+def test_a_segment_straight_to_round_off_keeps_newtons_steps():
+    # A tail segment that nothing bends (no tendon in it, gravity of 1e-20 m/s^2, as a
+    # property-based draw had) ends with curvatures of ~1e-22: straight to round-off. Its plane
+    # angle, held by the regulariser alone, must take the Newton step; carried along with a
+    # bending vector of that size, the angle turned by a random fraction of the step and the
+    # solve crept for 76-105 steps (batch and single then disagreed on success at the limit).
+    segments = [pj.Segment(0.1, 0.01, 1000.0, linear_density=0.1) for _ in range(3)]
+    tendons = [
+        pj.Tendon(0, 3.0, 0.01, mode="tension", routing="channel"),
+        pj.Tendon(1, -2.8, 0.01, mode="tension", routing="channel"),
+    ]
+    loads = [pj.Gravity(1e-20), pj.PointMass(0.05, 2, 0.5)]
+    scene = pj.Scene(pj.Robot(segments), pj.PAC(), tendons=tendons, loads=loads)
+    eq = pj.solve_batch(scene, np.array([[2.0, 1.0], [3.0, 0.2]]), fallback=False, progress=False)
+    assert np.all(np.asarray(eq.successful)), eq.reason
+    tail = np.asarray(eq.q).reshape(2, 3, -1)[:, 2, :2]
+    assert np.all(np.abs(tail) < 1e-15), tail
+    assert int(np.max(eq.steps)) <= 10, np.asarray(eq.steps)

@@ -134,7 +134,8 @@ class ScaledProblem(eqx.Module):
         ``c' = (c + dc) cos(turn) + c dphi sin(turn)``, so that ``theta' e(phi') = B'``. This
         agrees with ``y + dy`` to first order: the step's descent and the search along it are
         unchanged, and the plane's turn no longer creeps (``benchmarks/RESULTS.md``, "Figures
-        behind the solver's settings").
+        behind the solver's settings"). A segment straight to round-off (``|theta|`` within
+        ``1000 eps`` of zero, as in :meth:`aligned`) takes ``y + dy``: its ``B`` is noise.
         """
         k = self.scene.model.free_plane_angle()
         if k is None:
@@ -148,8 +149,10 @@ class ScaledProblem(eqx.Module):
         # The angle of B' from e(phi), in (-pi/2, pi/2]: arctan(theta dphi / (theta + dtheta)).
         turn = jnp.arctan2(theta * dphi * jnp.where(ahead < 0, -1.0, 1.0), jnp.abs(ahead))
         c_new = (c + dc) * jnp.cos(turn)[:, None] + c * (dphi * jnp.sin(turn))[:, None]
-        # An end that is not turned (straight, or an S of PAC) has no B to move: y + dy.
-        flat = theta == 0
+        # An end that is not turned (straight, or an S of PAC) has no B to move: y + dy. Nor
+        # has one turned by less than the curvatures' round-off: B's direction is noise there,
+        # and the turn it gives the plane would be a random fraction of dphi.
+        flat = jnp.abs(theta) <= 1e3 * jnp.finfo(y.dtype).eps
         c_new = jnp.where(flat[:, None], c + dc, c_new)
         turn = jnp.where(flat, dphi, turn)
         q_new = (q + dq).at[:, :k].set(c_new).at[:, k].set(q[:, k] + turn)
