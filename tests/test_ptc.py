@@ -194,3 +194,28 @@ def test_a_segment_straight_to_round_off_keeps_newtons_steps():
     tail = np.asarray(eq.q).reshape(2, 3, -1)[:, 2, :2]
     assert np.all(np.abs(tail) < 1e-15), tail
     assert int(np.max(eq.steps)) <= 10, np.asarray(eq.steps)
+
+
+def test_an_s_shaped_pac_segment_steps_in_its_polar_coordinates():
+    # A horizontal PAC cantilever under gravity and a 2 N tip force bends into an S (c0 ~ 8,
+    # c1 ~ -11: its end turned by less than half of what it bends). The plane's moves
+    # (ScaledProblem.moved) are singular there and the Newton model is the polar Hessian: with
+    # the step on the bending vector regardless, these rows took 28, 29, 13 and 21 steps.
+    inertia, area = np.pi * 0.01**4 / 4, np.pi * 0.01**2
+    segment = pj.Segment(0.3, 5.05e5 * inertia, 5.05e5 * area / 0.3, linear_density=1500 * area)
+    robot = pj.Robot([segment], base_rotation=pj.presets.MOUNTS["horizontal"])
+    scene = pj.Scene(robot, pj.PAC(), (), (pj.Gravity(), pj.PointForce(np.zeros(3), 0, 1.0)))
+    forces = jnp.asarray(
+        [[-1.8125, 1.3377, 0.1497], [-1.7182, -0.5525, 0.1005], [-1.78, 0.0866, -0.9805]]
+        + [[-1.8036, 0.9036, 0.8606]]
+    )
+    eq = pj.solve_batch(
+        scene,
+        jnp.zeros((4, 0)),
+        params=forces,
+        update=lambda sc, f: eqx.tree_at(lambda s: s.loads[1].force, sc, f),
+        fallback=False,
+        progress=False,
+    )
+    assert np.all(np.asarray(eq.successful)), eq.reason
+    assert int(np.max(eq.steps)) <= 15, np.asarray(eq.steps)

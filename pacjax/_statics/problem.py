@@ -5,6 +5,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import Array, Bool
 
 from .._config import MATMUL_PRECISION
 from .._model.hessian import dead_followers, energy_derivatives, follower_jacobian
@@ -16,6 +17,15 @@ from .._model.scene import Scene, SceneConstants
 _MOVE_CURVATURE_THETA = 1e-3
 #: Scaled residual below which the solver's Jacobian is the energy's Hessian again.
 _MOVE_CURVATURE_RESIDUAL = 1e-3
+
+
+def _singular_bends(c, beta) -> Bool[Array, " n"]:
+    """Per segment, whether the moves of :meth:`ScaledProblem.moved` are singular: the end
+    angle ``theta = c . beta`` below :data:`_MOVE_CURVATURE_THETA`, or below half of
+    ``sum |beta_j c_j|`` (an S of PAC, whose end is turned by little of what it bends)."""
+    theta = jnp.matmul(c, beta, precision=MATMUL_PRECISION)
+    spread = jnp.matmul(jnp.abs(c), jnp.abs(beta), precision=MATMUL_PRECISION)
+    return (jnp.abs(theta) < _MOVE_CURVATURE_THETA) | (jnp.abs(theta) < 0.5 * spread)
 
 
 class ScaledProblem(eqx.Module):
@@ -134,8 +144,11 @@ class ScaledProblem(eqx.Module):
         ``c' = (c + dc) cos(turn) + c dphi sin(turn)``, so that ``theta' e(phi') = B'``. This
         agrees with ``y + dy`` to first order: the step's descent and the search along it are
         unchanged, and the plane's turn no longer creeps (``benchmarks/RESULTS.md``, "Figures
-        behind the solver's settings"). A segment straight to round-off (``|theta|`` within
-        ``1000 eps`` of zero, as in :meth:`aligned`) takes ``y + dy``: its ``B`` is noise.
+        behind the solver's settings"). The step is ``y + dy`` for a segment straight to
+        round-off (``|theta|`` within ``1000 eps`` of zero, as in :meth:`aligned`) and, in a
+        conservative scene, wherever the moves are singular (:func:`_singular_bends`: an end
+        turned by little, an S of PAC), where the Newton model is the polar Hessian
+        (:meth:`move_curvature`).
         """
         k = self.scene.model.free_plane_angle()
         if k is None:
@@ -149,10 +162,17 @@ class ScaledProblem(eqx.Module):
         # The angle of B' from e(phi), in (-pi/2, pi/2]: arctan(theta dphi / (theta + dtheta)).
         turn = jnp.arctan2(theta * dphi * jnp.where(ahead < 0, -1.0, 1.0), jnp.abs(ahead))
         c_new = (c + dc) * jnp.cos(turn)[:, None] + c * (dphi * jnp.sin(turn))[:, None]
-        # An end that is not turned (straight, or an S of PAC) has no B to move: y + dy. Nor
-        # has one turned by less than the curvatures' round-off: B's direction is noise there,
-        # and the turn it gives the plane would be a random fraction of dphi.
+        # A conservative scene's Newton model follows the moves except where they are singular
+        # (move_curvature); there the step is polar too: at an end turned by little, or by
+        # little of what an S of PAC bends it, B' turns the plane by theta dphi / (theta +
+        # dtheta), a fraction of dphi that the model does not know, and the search found no
+        # descent along it. (A non-conservative scene's model is always polar, and the moves
+        # are what lead its follower rows off an indefinite attractor: tests/test_ptc.py.) A
+        # bend at round-off is no bend in any scene: its B' would turn the plane by a random
+        # fraction of dphi.
         flat = jnp.abs(theta) <= 1e3 * jnp.finfo(y.dtype).eps
+        if self.scene.is_conservative:
+            flat = flat | _singular_bends(c, beta)
         c_new = jnp.where(flat[:, None], c + dc, c_new)
         turn = jnp.where(flat, dphi, turn)
         q_new = (q + dq).at[:, :k].set(c_new).at[:, k].set(q[:, k] + turn)
@@ -182,8 +202,7 @@ class ScaledProblem(eqx.Module):
         beta = self.scene.model.plane_angle_basis(jnp.ones((), q.dtype))
         c = coords[:, :k]
         theta = jnp.matmul(c, beta, precision=MATMUL_PRECISION)
-        spread = jnp.matmul(jnp.abs(c), jnp.abs(beta), precision=MATMUL_PRECISION)
-        singular = (jnp.abs(theta) < _MOVE_CURVATURE_THETA) | (jnp.abs(theta) < 0.5 * spread)
+        singular = _singular_bends(c, beta)
         along_phi = jnp.where(singular, 0.0, jnp.sum(force[:, :k] * c, axis=1))
         turn = jnp.where(singular, 0.0, -force[:, k] / jnp.where(singular, 1.0, theta))
         cross = (turn[:, None] * beta[None, :]).reshape(-1)
