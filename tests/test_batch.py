@@ -107,6 +107,7 @@ def test_pools_side_by_side_agree_with_one_pool_and_stop_cleanly(scene, monkeypa
     assert threading.active_count() == threads
 
 
+@pytest.mark.slow  # two batch programs of the paper's robot (static and traced site)
 def test_known_load_site_is_static_and_agrees_with_a_traced_site(scene):
     # A load site known before the solve is compiled in as a knot; a traced one (here under
     # jit) is integrated on its own. Both are the same physics.

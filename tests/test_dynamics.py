@@ -196,6 +196,7 @@ def test_input_validation():
         pj.simulate(SCENE, (0.0, 1.0), damping=0.1)
 
 
+@pytest.mark.slow  # a float32 copy of every dynamics program: CI's slow step
 @pytest.mark.parametrize("damping", [None, pj.Damping(stiffness=1e-3)], ids=["modal", "given"])
 def test_a_float32_scene_simulates_in_float32(damping):
     """Found by the campaign: ``Damping()``'s zero mass coefficient was a float64 array, which

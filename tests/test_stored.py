@@ -92,6 +92,7 @@ def test_calls_that_cannot_be_keyed_are_not_stored(store, monkeypatch):
     assert not list(store.glob("*.bin"))
 
 
+@pytest.mark.slow  # a new Python process that imports pacjax and compiles: CI's slow step
 def test_a_solve_in_a_new_process_loads_its_program_and_agrees(tmp_path):
     """Two processes with the same cache: the second solves (one equilibrium, and a batch,
     whose rounds compile in a thread) without tracing the solver and gets the first one's
