@@ -13,8 +13,9 @@ speed; ``XLA_FLAGS`` setting a level stands). Every draw is recorded (structure,
 any broken property, a crash's message and where it was raised, and the drawn values of any
 draw that did not end in a successful single solve) in
 ``benchmarks/results/campaign.json``, rewritten after every draw so that an interrupted run keeps
-what it did; ``--resume`` continues one at its next structure, and ``--minutes`` stops a run
-after its last structure that started within that time.
+what it did; ``--resume`` continues one at its next structure (``runs`` says from which
+structure each commit drew), and ``--minutes`` stops a run after its last structure that started
+within that time.
 
 Each structure runs in a child process. A draw that gives no result within ``--draw-seconds``
 (``--first-draw-seconds`` for a structure's first, which compiles every program) is recorded as
@@ -239,11 +240,16 @@ def main(
     ).stdout.strip()
     t0 = time.perf_counter()
     previous_wall = (done or {}).get("wall_s", 0.0)
+    # Which commit drew which structures: a resumed record holds the draws of several.
+    runs = (done or {}).get("runs", []) + [
+        {"commit": commit, "date": time.strftime("%Y-%m-%d"), "from_structure": start}
+    ]
 
     def save(structures_done: int) -> dict:
         result = {
             "commit": commit,
             "date": time.strftime("%Y-%m-%d"),
+            "runs": runs,
             "plan": dataclasses.asdict(plan),
             "structures_done": structures_done,
             "draws": len(records),
