@@ -19,7 +19,7 @@ within that time.
 
 Each structure runs in a child process. A draw that gives no result within ``--draw-seconds``
 (``--first-draw-seconds`` for a structure's first, which compiles every program) is recorded as
-a ``hang``, with the operation it was in, and the child is killed; a
+a ``hang``, with the operation it was in and the values it drew, and the child is killed; a
 child that dies (an abort inside XLA, a segmentation fault, memory) is recorded as a ``crash``
 with its exit status. Either way the campaign goes on with the next structure.
 
@@ -77,6 +77,8 @@ OPERATIONS = ("gradient", "find_equilibria", "simulate")
 _RECORD = "CAMPAIGN-RECORD "
 #: A child's line that names the operation a draw starts.
 _OPERATION = "CAMPAIGN-OPERATION "
+#: A child's line with a draw's values, before its operations: a hang or crash record keeps them.
+_VALUES = "CAMPAIGN-VALUES "
 
 
 @dataclasses.dataclass(frozen=True)
@@ -101,10 +103,12 @@ def run_structure(
     plan: Plan,
     on_draw=lambda record: None,
     on_operation=lambda name: None,
+    on_values=lambda values: None,
 ) -> list[dict]:
     """The value draws of structure ``k``; one record per draw, each also passed to
-    ``on_draw`` as soon as it is made (and each operation's name to ``on_operation`` as it
-    starts). The single and batch solves run on every draw."""
+    ``on_draw`` as soon as it is made (each draw's values to ``on_values`` before it runs, and
+    each operation's name to ``on_operation`` as it starts). The single and batch solves run on
+    every draw."""
     records = []
     t_start = time.perf_counter()
 
@@ -124,6 +128,7 @@ def run_structure(
         if records and budget is not None and time.perf_counter() - t_start > budget:
             return  # hypothesis still counts the example; it costs nothing more
         record = {"structure": structure.describe()}
+        on_values(drawn)
         t0 = time.perf_counter()
         try:
             scene, controls = build(structure, drawn)
@@ -178,7 +183,7 @@ def run_child(k: int, describe: str, plan: Plan, limits: tuple[float, float], on
         lines.put(None)
 
     threading.Thread(target=read, daemon=True).start()
-    given, operation = 0, "starting"
+    given, operation, values = 0, "starting", None
     limit = limits[0]
     deadline = time.perf_counter() + limit
     while True:
@@ -188,12 +193,14 @@ def run_child(k: int, describe: str, plan: Plan, limits: tuple[float, float], on
             proc.kill()
             proc.wait()
             what = f"draw {given}: no result in {limit:g} s, in {operation}"
-            on_draw(_failed(describe, "hang", what))
+            on_draw(_failed(describe, "hang", what, values))
             return
         if line is None:
             break
         if line.startswith(_OPERATION):
             operation = line[len(_OPERATION) :].strip()
+        elif line.startswith(_VALUES):
+            values = json.loads(line[len(_VALUES) :])
         elif line.startswith(_RECORD):
             given += 1
             on_draw(json.loads(line[len(_RECORD) :]))
@@ -201,12 +208,17 @@ def run_child(k: int, describe: str, plan: Plan, limits: tuple[float, float], on
             deadline = time.perf_counter() + limit
     status = proc.wait()
     if status != 0:
-        on_draw(_failed(describe, "crash", f"draw {given}: the process ended with status {status}"))
+        what = f"draw {given}: the process ended with status {status}"
+        on_draw(_failed(describe, "crash", what, values))
 
 
-def _failed(describe: str, outcome: str, error: str) -> dict:
-    """The record of a draw that gave no result."""
-    return {"structure": describe, "outcome": outcome, "error": error, "seconds": None}
+def _failed(describe: str, outcome: str, error: str, values=None) -> dict:
+    """The record of a draw that gave no result, with its values where the child sent them (to
+    rebuild the scene: ``build(structure, values)``)."""
+    record = {"structure": describe, "outcome": outcome, "error": error, "seconds": None}
+    if values is not None:
+        record["values"] = values
+    return record
 
 
 def child(k: int, plan: Plan) -> None:
@@ -220,7 +232,10 @@ def child(k: int, plan: Plan) -> None:
     def started(name):
         print(_OPERATION + name, flush=True)
 
-    run_structure(structure, k, plan, emit, started)
+    def drawn(values):
+        print(_VALUES + json.dumps(values), flush=True)
+
+    run_structure(structure, k, plan, emit, started, drawn)
 
 
 def main(
