@@ -19,11 +19,15 @@ _MOVE_CURVATURE_THETA = 1e-3
 _MOVE_CURVATURE_RESIDUAL = 1e-3
 
 
-def _singular_bends(c, beta) -> Bool[Array, " n"]:
+def _round_off(dtype) -> float:
+    """Curvature coordinates within this of zero are straight to round-off (their scale is 1)."""
+    return 1e3 * float(jnp.finfo(dtype).eps)
+
+
+def _singular_bends(theta, c, beta) -> Bool[Array, " n"]:
     """Per segment, whether the moves of :meth:`ScaledProblem.moved` are singular: the end
     angle ``theta = c . beta`` below :data:`_MOVE_CURVATURE_THETA`, or below half of
     ``sum |beta_j c_j|`` (an S of PAC, whose end is turned by little of what it bends)."""
-    theta = jnp.matmul(c, beta, precision=MATMUL_PRECISION)
     spread = jnp.matmul(jnp.abs(c), jnp.abs(beta), precision=MATMUL_PRECISION)
     return (jnp.abs(theta) < _MOVE_CURVATURE_THETA) | (jnp.abs(theta) < 0.5 * spread)
 
@@ -170,9 +174,9 @@ class ScaledProblem(eqx.Module):
         # are what lead its follower rows off an indefinite attractor: tests/test_ptc.py.) A
         # bend at round-off is no bend in any scene: its B' would turn the plane by a random
         # fraction of dphi.
-        flat = jnp.abs(theta) <= 1e3 * jnp.finfo(y.dtype).eps
+        flat = jnp.abs(theta) <= _round_off(y.dtype)
         if self.scene.is_conservative:
-            flat = flat | _singular_bends(c, beta)
+            flat = flat | _singular_bends(theta, c, beta)
         c_new = jnp.where(flat[:, None], c + dc, c_new)
         turn = jnp.where(flat, dphi, turn)
         q_new = (q + dq).at[:, :k].set(c_new).at[:, k].set(q[:, k] + turn)
@@ -202,7 +206,7 @@ class ScaledProblem(eqx.Module):
         beta = self.scene.model.plane_angle_basis(jnp.ones((), q.dtype))
         c = coords[:, :k]
         theta = jnp.matmul(c, beta, precision=MATMUL_PRECISION)
-        singular = _singular_bends(c, beta)
+        singular = _singular_bends(theta, c, beta)
         along_phi = jnp.where(singular, 0.0, jnp.sum(force[:, :k] * c, axis=1))
         turn = jnp.where(singular, 0.0, -force[:, k] / jnp.where(singular, 1.0, theta))
         cross = (turn[:, None] * beta[None, :]).reshape(-1)
@@ -245,7 +249,7 @@ class ScaledProblem(eqx.Module):
         coords = self.scene.coordinates(y)
         # Straight to round-off, not only exactly: an equilibrium solved from a straight start
         # comes back with curvatures of 1e-18, and a plane kept there is the same saddle.
-        round_off = 1e3 * jnp.finfo(y.dtype).eps
+        round_off = _round_off(y.dtype)
         straight = jnp.all(jnp.abs(coords[:, :k]) <= round_off, axis=1)
         if keep is not None:
             straight = straight & ~keep
