@@ -28,9 +28,10 @@ LAYERS = (
             "pacjax._deprecated",
         ),
     ),
-    # physics: strain fields, kinematics, the body, tendons, loads, their energies
+    # physics: parameter values, strain fields, kinematics, the body, tendons, loads, energies
     (
         (
+            "pacjax._model.values",
             "pacjax._model.rotation",
             "pacjax._model.quadrature",
             "pacjax._model.strain",

@@ -9,8 +9,8 @@ from jaxtyping import Array, Float
 from .._config import MATMUL_PRECISION
 from .._model.inertia import mass_matrix
 from .._model.inputs import solver_dtype
-from .._model.robot import as_float, check_positive, concrete
 from .._model.scene import Scene
+from .._model.values import as_float, check_positive, concrete
 
 #: Damping ratio of the lowest mode of the straight body under the default damping.
 DEFAULT_DAMPING_RATIO = 0.05

@@ -39,8 +39,8 @@ from .._model.inputs import (
     solver_dtype,
     static_load_sites,
 )
-from .._model.robot import concrete
 from .._model.scene import Scene
+from .._model.values import concrete
 from .._results import RESULTS
 from .._statics.problem import ScaledProblem
 from .damping import Damping

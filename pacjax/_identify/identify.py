@@ -29,14 +29,13 @@ from collections.abc import Sequence
 
 import jax.numpy as jnp
 import numpy as np
-import optax
 
 from .. import _deprecated
 from .._model.frameloads import with_frame_loads
-from .._model.inputs import check_int, check_scene
+from .._model.inputs import check_int
 from .._model.scene import Scene
-from .._model.sites import normalise_sites
 from .._statics.options import SolverOptions, resolve_options
+from .checks import check_data, check_settings
 from .dataset import MocapDataset
 from .descent import Descent, DescentSettings, descend, run_summary, starting_points
 from .estimates import covariance, parameter_table
@@ -51,79 +50,6 @@ from .problem import (
     theta_bounds,
 )
 from .report import FitErrors, IdentificationReport
-
-
-def _check(scene: Scene, dataset: MocapDataset, name: str) -> None:
-    if not isinstance(dataset, MocapDataset):
-        raise TypeError(f"{name} must be a pacjax.MocapDataset, got {type(dataset).__name__}")
-    if dataset.n_controls != scene.n_tendons:
-        raise ValueError(
-            f"{name} has {dataset.n_controls} control column(s) but the scene has "
-            f"{scene.n_tendons} tendon(s)"
-        )
-    normalise_sites(dataset.sites, scene.n_segments, f"{name}.sites")
-    for i, t in enumerate(scene.tendons):
-        if t.mode == "tension" and np.any(dataset.controls[:, i] < 0):
-            raise ValueError(f"{name}.controls[:, {i}] are tensions and must be >= 0")
-
-
-def _check_variation(dataset: MocapDataset) -> None:
-    if dataset.n_frames < 2:
-        return
-    cond = dataset.conditions()
-    if np.all(cond == cond[0]):
-        raise ValueError(
-            "every training frame has the same controls and loads (no variation): the data "
-            "cannot separate the parameters; record poses under different commands or payloads"
-        )
-    m = dataset.markers
-    spread = np.nanmax(np.nanmax(m, 0) - np.nanmin(m, 0))
-    if spread == 0.0:
-        raise ValueError(
-            "the markers are identical in every frame although the controls change: the marker "
-            "columns look frozen or mismatched"
-        )
-
-
-def _check_data(
-    scene: Scene, dataset: MocapDataset, validation: MocapDataset | None, holdout: float, seed: int
-) -> tuple[MocapDataset, MocapDataset | None]:
-    """The checked training and held-out frames (``holdout``: split off ``dataset``)."""
-    check_scene(scene)
-    _check(scene, dataset, "dataset")
-    chosen = np.iterable(holdout) and not isinstance(holdout, (str, bytes))
-    if validation is not None and (chosen or holdout):
-        raise ValueError("give either validation= or holdout=, not both")
-    if validation is None and not (chosen or holdout) and dataset.holdout is not None:
-        if dataset.holdout.any():
-            holdout, chosen = np.flatnonzero(dataset.holdout).tolist(), True
-    if chosen or holdout:
-        dataset, validation = dataset.split(holdout, seed)
-    if validation is not None:
-        _check(scene, validation, "validation")
-        if validation.sites != dataset.sites:
-            raise ValueError("validation must have the same marker sites as dataset")
-    _check_variation(dataset)
-    return dataset, validation
-
-
-def _check_settings(loss, noise, orientation_noise, huber_delta, max_iterations, optimizer) -> None:
-    """Raise for a loss, a noise scale, an iteration limit or an optimiser ``identify`` lacks."""
-    if loss not in ("l2", "huber"):
-        raise ValueError(f"loss must be 'l2' or 'huber', got {loss!r}")
-    if not noise > 0 or not orientation_noise > 0 or not huber_delta > 0:
-        raise ValueError("noise, orientation_noise and huber_delta must be > 0")
-    if max_iterations < 0:
-        raise ValueError(f"max_iterations must be >= 0, got {max_iterations}")
-    lm = isinstance(optimizer, str)
-    if lm and optimizer != "levenberg-marquardt":
-        raise ValueError(
-            f"optimizer must be 'levenberg-marquardt' or an optax optimiser, got {optimizer!r}"
-        )
-    if not lm and not isinstance(optimizer, optax.GradientTransformation):
-        raise TypeError(
-            "optimizer must be 'levenberg-marquardt' or an optax.GradientTransformation"
-        )
 
 
 def identify(
@@ -227,8 +153,8 @@ def identify(
         offsets), and an :class:`IdentificationReport`.
     """
     t_start = time.perf_counter()
-    dataset, validation = _check_data(scene, dataset, validation, holdout, seed)
-    _check_settings(loss, noise, orientation_noise, huber_delta, max_iterations, optimizer)
+    dataset, validation = check_data(scene, dataset, validation, holdout, seed)
+    check_settings(loss, noise, orientation_noise, huber_delta, max_iterations, optimizer)
     n_starts = check_int("n_starts", n_starts, 1)
     branch_starts = check_int("branch_starts", branch_starts, 0)
     if stages is not None:

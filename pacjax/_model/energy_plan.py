@@ -14,8 +14,8 @@ from .channels import ChannelRouting
 from .energy import mass_beyond
 from .kinematics import Knots, index_runs
 from .loads import PointForce, PointMass
-from .robot import concrete
 from .tendons import LocalChords, TendonRouting
+from .values import concrete
 
 
 class PointSet:

@@ -39,10 +39,10 @@ from jaxtyping import Array, Float
 from .._config import MATMUL_PRECISION
 from .kinematics import contract, index_runs, jacobian_and_value
 from .loads import PointForce, PointMoment
-from .robot import known_sites
 from .rotation import hat, matvec3
 from .scene import Scene, SceneConstants
 from .tendons import tendon_parts_derivatives
+from .values import known_sites
 
 
 def _contract(jac, delta):

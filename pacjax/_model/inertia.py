@@ -49,10 +49,10 @@ from .._config import MATMUL_PRECISION
 from .kinematics import Knots, chain_segments
 from .loads import PointMass
 from .quadrature import gauss_legendre
-from .robot import known_sites
 from .rotation import cross3, matmul3, matvec3
 from .scene import Scene
 from .strain import PlanarCurvature
+from .values import known_sites
 
 #: Default factor of the regularising inertia on PCC/PAC's bending-plane angle ``phi``.
 PHI_INERTIA_FACTOR = 1e-6

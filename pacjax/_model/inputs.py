@@ -7,8 +7,8 @@ import jax.numpy as jnp
 import jax.tree_util as jtu
 import numpy as np
 
-from .robot import concrete
 from .scene import Scene
+from .values import concrete
 
 
 def frozen(tree):

@@ -10,7 +10,7 @@ import equinox as eqx
 import numpy as np
 from jaxtyping import Array, Float
 
-from .robot import check_finite, check_positive, check_scalar, concrete, float_field
+from .values import check_finite, check_positive, check_scalar, concrete, float_field
 
 
 def _check_site(owner: str, segment, s) -> None:

@@ -15,12 +15,11 @@ from jaxtyping import Array, Float
 from .._config import MATMUL_PRECISION
 from .channels import ChannelRouting, segment_channel_parts
 from .energy import elastic_energy, mass_beyond, moment_cotangent, robot_section_stiffness
-from .energy_plan import EnergyPlan, Indexed
+from .energy_plan import EnergyPlan
 from .kinematics import (
     KinematicsConfig,
     Knots,
     PointLayout,
-    chain_segments,
     contract,
     grid_frames,
     has_plane_derivatives,
@@ -30,27 +29,17 @@ from .kinematics import (
     segment_knot_curvature,
     segment_knot_frames,
     segment_knot_jacobian,
-    take_runs,
 )
 from .layout import free_coordinates, rest_coordinates, split_models
-from .loads import Gravity, PointForce, PointMass, PointMoment
-from .robot import Robot, concrete, known_sites
-from .rotation import matmul3, matvec3
+from .load_energy import load_energy
+from .loads import Gravity, PointForce, PointMoment
+from .robot import Robot
+from .rotation import matvec3
+from .scene_fields import check_fields, count_of, sequence_of
 from .sites import normalise_sites
 from .strain import StrainModel
-from .tendons import Tendon, TendonRouting, segment_tendon_parts, tendon_energy, tendon_tensions
-
-
-def _sequence(owner: str, items, kind: str) -> tuple:
-    if isinstance(items, (str, bytes)) or not np.iterable(items) or isinstance(items, eqx.Module):
-        raise TypeError(f"{owner} must be a sequence of {kind}, got {type(items).__name__}")
-    return tuple(items)
-
-
-def _count(owner: str, value) -> int:
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
-        raise TypeError(f"{owner} must be an integer, got {value!r}")
-    return int(value)
+from .tendons import Tendon, TendonRouting, segment_tendon_parts, tendon_tensions
+from .values import concrete, known_sites
 
 
 class SceneConstants(eqx.Module):
@@ -115,75 +104,18 @@ class Scene(eqx.Module):
             raise TypeError(f"Scene.robot must be a Robot, got {type(robot).__name__}")
         self.robot = robot
         self.model, self.segment_models = split_models(model, robot.n_segments)
-        self.tendons = _sequence("Scene.tendons", tendons, "Tendons")
-        self.loads = _sequence("Scene.loads", loads, "loads")
+        self.tendons = sequence_of("Scene.tendons", tendons, "Tendons")
+        self.loads = sequence_of("Scene.loads", loads, "loads")
         self.markers = normalise_sites(markers, robot.n_segments, "Scene.markers")
-        self.quadrature_points = _count("Scene.quadrature_points", quadrature_points)
+        self.quadrature_points = count_of("Scene.quadrature_points", quadrature_points)
         self.rotation_substeps = (
             None
             if rotation_substeps is None
-            else _count("Scene.rotation_substeps", rotation_substeps)
+            else count_of("Scene.rotation_substeps", rotation_substeps)
         )
 
     def __check_init__(self):
-        if not isinstance(self.robot, Robot):
-            raise TypeError(f"Scene.robot must be a Robot, got {type(self.robot).__name__}")
-        if not isinstance(self.model, StrainModel):
-            raise TypeError(
-                "Scene.model must be a strain model (PCC, PAC, PolynomialCurvature), "
-                f"got {self.model!r}"
-            )
-        n = self.robot.n_segments
-        for i, t in enumerate(self.tendons):
-            if not isinstance(t, Tendon):
-                raise TypeError(f"Scene.tendons[{i}] must be a Tendon, got {type(t).__name__}")
-            if t.segment >= n:
-                raise ValueError(
-                    f"Scene.tendons[{i}] is anchored on segment {t.segment}, but the robot has "
-                    f"{n} segments (0..{n - 1})"
-                )
-        if any(t.routing == "channel" for t in self.tendons):
-            q0 = jnp.zeros(self.model.dofs_per_segment())
-            if self.model.base_rotation(q0) is not None:
-                raise ValueError(
-                    "Scene.tendons: a channel tendon needs frames that run on continuously from "
-                    "one segment to the next; this model twists each segment's base "
-                    "(frame='paper'): use frame='torsion_free' or rings"
-                )
-        kinds = (Gravity, PointMass, PointForce, PointMoment)
-        for i, load in enumerate(self.loads):
-            if not isinstance(load, kinds):
-                raise TypeError(f"Scene.loads[{i}] must be one of {[k.__name__ for k in kinds]}")
-            if not isinstance(load, Gravity) and load.segment >= n:
-                raise ValueError(
-                    f"Scene.loads[{i}] ({type(load).__name__}) is on segment {load.segment}, but "
-                    f"the robot has {n} segments (0..{n - 1})"
-                )
-        if sum(isinstance(load, Gravity) for load in self.loads) > 1:
-            raise ValueError("Scene.loads holds more than one Gravity")
-        if self.loads_of(PointMass) and self.gravity is None:
-            raise ValueError("Scene.loads has a PointMass but no Gravity to pull on it")
-        # Gauss-Legendre with n points is exact to degree 2n - 1: the elastic energy (degree
-        # 2 k in s, + 4 for a taper's r^4, + a profile's) must be integrated exactly, or its
-        # Hessian loses rank.
-        profile = max(seg.profile_degree() for seg in self.robot.segments)
-        needed = self.model.strain_degree() + 1 + (profile + 1) // 2
-        if self.quadrature_points < needed:
-            raise ValueError(
-                f"Scene.quadrature_points must be >= {needed} for this model"
-                f"{' with tapered or profiled segments' if profile else ''} (the elastic energy "
-                f"is integrated exactly only then), got {self.quadrature_points}"
-            )
-        if self.rotation_substeps is not None and self.rotation_substeps < 1:
-            raise ValueError(f"Scene.rotation_substeps must be >= 1, got {self.rotation_substeps}")
-        for i, (seg, model) in enumerate(zip(self.robot.segments, self.models, strict=True)):
-            want = model.dofs_per_segment() - 1
-            if seg.rest_curvature is not None and seg.rest_curvature.shape != (want,):
-                names = ", ".join(model.coordinate_names()[:-1])
-                raise ValueError(
-                    f"Scene.robot.segments[{i}].rest_curvature must hold {want} numbers for "
-                    f"{type(model).__name__} ({names}), got shape {seg.rest_curvature.shape}"
-                )
+        check_fields(self)
 
     # ----------------------------------------------------------------------------- structure
     def loads_of(self, kind, follower=None) -> list:
@@ -503,52 +435,9 @@ class Scene(eqx.Module):
     def load_energy(
         self, local, controls, plan: EnergyPlan, consts: SceneConstants
     ) -> Float[Array, ""]:
-        """``Psi``: gravity, tendon and world-force energy (J) from the local kinematics."""
-        (rot, pos, moment, parts), traced = local
-        dtype = rot.dtype
-        base_rot, base_pos = chain_segments(
-            rot[:, -1], pos[:, -1], self.robot.base_rotation, self.robot.base_position
-        )
-        # World frames of the points that need them (static slices, no gather).
-        segs = plan.world_segments + [k for k, _ in plan.points.traced]
-        local_rot = [r[None] for r, _ in traced]
-        local_pos = [p[None] for _, p in traced]
-        if plan.world_points:
-            local_rot.insert(0, take_runs(rot, plan.world_runs))
-            local_pos.insert(0, take_runs(pos, plan.world_runs))
-        rows = {k: i for i, k in enumerate(plan.world_points)}
-        rot_at = pos_at = Indexed(None, rows, len(plan.world_points))
-        if segs:
-            frame_rot = jnp.stack([base_rot[k] for k in segs])
-            frame_pos = jnp.stack([base_pos[k] for k in segs])
-            local_rot = jnp.concatenate(local_rot)
-            local_pos = jnp.concatenate(local_pos)
-            rot_at = Indexed(matmul3(frame_rot, local_rot), rows, len(plan.world_points))
-            pos_at = Indexed(
-                frame_pos + matvec3(frame_rot, local_pos), rows, len(plan.world_points)
-            )
-        energy = jnp.zeros((), dtype)
-        if plan.gravity is not None:
-            accel = plan.gravity.acceleration.astype(dtype)
-            # The body's first mass moment sum_i int rho A L p ds (kg m), by parts.
-            body = jnp.sum(consts.body_mass[:, None] * base_pos + matvec3(base_rot, moment), axis=0)
-            energy = energy - jnp.matmul(body, accel, precision=MATMUL_PRECISION)
-            for pm, k in zip(plan.point_masses, plan.mass_ids, strict=True):
-                energy = energy - pm.mass.astype(dtype) * jnp.dot(
-                    pos_at[k], accel, precision=MATMUL_PRECISION
-                )
-        if plan.has_tendons:
-            # Local chords and channels as per-segment parts; chords that span a segment
-            # without a ring at its end in the world.
-            lengths = jnp.zeros(self.n_tendons, dtype) if parts is None else jnp.sum(parts, axis=0)
-            if plan.routing is not None and plan.chords is None:
-                sl = plan.guide_ids
-                guides = pos_at[sl] + matvec3(rot_at[sl], consts.guide_offsets)
-                lengths = lengths + plan.routing.lengths(guides)
-            energy = energy + tendon_energy(self.tendons, lengths, consts.rest_lengths, controls)
-        for f, k in zip(plan.forces, plan.force_ids, strict=True):
-            energy = energy - jnp.sum(f.force.astype(dtype) * pos_at[k])
-        return energy
+        """``Psi``: gravity, tendon and world-force energy (J) from the local kinematics
+        (:func:`pacjax._model.load_energy.load_energy`)."""
+        return load_energy(self, local, controls, plan, consts)
 
     def nonconservative_forces(self, q: Float[Array, " n_dofs"]) -> Float[Array, " n_dofs"] | None:
         """Generalised forces of follower forces and point moments (None when there are none)."""

@@ -20,7 +20,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from .._config import MATMUL_PRECISION
-from .robot import as_float, check_finite, check_positive, check_scalar, float_field
+from .values import as_float, check_finite, check_positive, check_scalar, float_field
 
 MODES = ("length", "tension")
 ROUTINGS = ("rings", "channel")

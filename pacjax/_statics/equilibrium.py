@@ -44,9 +44,10 @@ from .._model.scene import Scene
 from .._results import CONVERGED_SADDLE, from_code
 from .continuation import conservative_part, retry_failed
 from .implicit import implicit_equilibrium
+from .modes import max_abs
 from .options import SolverOptions, initial_dt, resolve_options
 from .problem import ScaledProblem, flow_field
-from .ptc import PseudoTransientContinuation, final_code, max_abs
+from .ptc import PseudoTransientContinuation, final_code
 from .ringcheck import check_rows, warn_sparse_rings
 from .solution import Equilibrium
 

@@ -29,6 +29,7 @@ from jaxtyping import Array, Bool, Float, Int
 from .._config import MATMUL_PRECISION
 from .._results import MAX_STEPS_REACHED, NONFINITE, STALLED, SUCCESSFUL
 from . import linalg as _linalg
+from .modes import max_abs, saddle_free_step, stiffness_modes
 
 _MIN_DT = 1e-10
 _MIN_ALPHA = 1.0 / 256
@@ -69,26 +70,6 @@ def _moved(args, y, dy):
     return args.moved(y, dy) if hasattr(args, "moved") else y + dy
 
 
-def max_abs(x):
-    return jnp.max(jnp.abs(x))
-
-
-def stiffness_modes(jac, weights, size, tol):
-    """Eigen-decomposition of ``K = diag(w) J diag(1/w)`` symmetrised, and an escape step.
-
-    With ``w = sqrt(d) sigma`` the matrix ``K`` is ``D^-1/2 (dF/dq) D^-1/2``: the stiffness
-    relative to the elastic stiffness, whose eigenvalue signs are those of the Hessian. The
-    escape step (in ``y``) follows every direction of negative curvature at once, so a saddle
-    with several unstable modes (one per segment of a robot) is left in one go.
-    """
-    k = (weights[:, None] * jac) / weights[None, :]
-    eigvals, eigvecs = _linalg.eigh(0.5 * (k + k.T))
-    unstable = (eigvals < -tol).at[0].set(True)
-    dy = (jnp.matmul(eigvecs, jnp.where(unstable, 1.0, 0.0), precision=MATMUL_PRECISION)) / weights
-    dy = size * dy / jnp.maximum(max_abs(dy), jnp.finfo(dy.dtype).tiny)
-    return eigvals, eigvecs, dy
-
-
 class _Point(NamedTuple):
     """The iterate reached by the search and the problem linearised there."""
 
@@ -98,18 +79,6 @@ class _Point(NamedTuple):
     jacobian: Float[Array, "n n"]
     weights: Float[Array, " n"]
     drive: Float[Array, " n"]
-
-
-def _saddle_free_step(state: PTCState) -> Float[Array, " n"]:
-    """The continuation step of a conservative scene, from the stiffness modes of ``state``.
-
-    ``K`` is the scaled Hessian. Continuation step with ``|lambda|`` ("saddle-free" Newton): full
-    Newton along stable modes, descent along the others; ``1 / dt`` shifts every mode.
-    """
-    w = state.weights
-    rz = jnp.matmul(state.eigvecs.T, w * state.residual, precision=MATMUL_PRECISION)
-    gain = 1.0 / (jnp.abs(state.eigvals) + 1.0 / state.dt)
-    return -(jnp.matmul(state.eigvecs, gain * rz, precision=MATMUL_PRECISION)) / w
 
 
 def _shorter(alpha, merit, merit0, slope):
@@ -230,14 +199,17 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
         """The step ``delta`` from ``y`` that the search shortens, and ``took_newton``.
 
         ``delta`` is zero on the first step, ``state.escape_dy`` on an escape, else the
-        continuation step from the linearisation in ``state`` (:func:`_saddle_free_step` for a
+        continuation step from the linearisation in ``state`` (:func:`saddle_free_step` for a
         conservative scene, :meth:`_shifted_flow_step` for the others). ``took_newton`` (``None``
         for a conservative scene) says that it is a plain Newton step that halved the residual.
         """
         # Where the stiffness is indefinite (a saddle or a maximum nearby) the step must still
         # go downhill and must not be drawn to the saddle.
         if self.symmetric:
-            newton, took_newton = _saddle_free_step(state), None
+            newton = saddle_free_step(
+                state.eigvals, state.eigvecs, state.weights, state.residual, state.dt
+            )
+            took_newton = None
         else:
             newton, took_newton = self._shifted_flow_step(fn, y, args, state, first, escape)
         delta = jnp.where(first, 0.0, jnp.where(escape, state.escape_dy, newton))
