@@ -32,6 +32,7 @@ LAYERS = (
     (
         (
             "pacjax._model.values",
+            "pacjax._model.trig",
             "pacjax._model.rotation",
             "pacjax._model.quadrature",
             "pacjax._model.strain",

@@ -40,6 +40,7 @@ from .._model.inputs import (
     static_load_sites,
 )
 from .._model.scene import Scene
+from .._model.strain import PlanarCurvature
 from .._model.values import concrete
 from .._results import RESULTS
 from .._statics.problem import ScaledProblem
@@ -214,7 +215,7 @@ def prepare(
         raise ValueError(f"phi_inertia must be >= 0, got {phi_inertia}")
     # Known point-mass sites become knots of the kinematics (as in the statics): a traced site
     # integrates its own frame in every kinematics pass, and the vector field has several.
-    scene = static_load_sites(as_traced_leaves(scene, dtype))
+    scene = _fused_trig(static_load_sites(as_traced_leaves(scene, dtype)))
     damping = _check_damping(scene, damping, dtype)
     opts = _Options(
         solver=default_solver(rtol) if solver is None else solver,
@@ -227,6 +228,26 @@ def prepare(
     )
     span = jnp.asarray([t0, t1], dtype)
     return scene, damping, opts, span, jnp.asarray(ts, dtype)
+
+
+def _fused_trig(scene: Scene) -> Scene:
+    """``scene`` with its PCC/PAC models taking sines and cosines as fused arithmetic
+    (:mod:`pacjax._model.trig`): a simulation evaluates its vector field thousands of times, so
+    the program's run time counts for more than its compile time."""
+    models = tuple(
+        m.with_fused_trig() if isinstance(m, PlanarCurvature) else m for m in scene.models
+    )
+    if models == scene.models:
+        return scene
+    return Scene(
+        scene.robot,
+        models if scene.segment_models else models[0],
+        scene.tendons,
+        scene.loads,
+        scene.markers,
+        scene.quadrature_points,
+        scene.rotation_substeps,
+    )
 
 
 def _check_body(scene: Scene) -> None:

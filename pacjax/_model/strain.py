@@ -15,6 +15,7 @@ points to where the backbone curves: a positive ``k_x`` bends the tip towards th
 """
 
 import abc
+import dataclasses
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -22,6 +23,7 @@ from jaxtyping import Array, Float
 
 from .._config import MATMUL_PRECISION
 from .rotation import hat, rot_z
+from .trig import library_sincos, sin_cos_versine, sincos
 
 _FRAMES = ("torsion_free", "paper")
 
@@ -129,12 +131,13 @@ def _check_frame(frame: str) -> None:
         raise ValueError(f"frame must be one of {_FRAMES}, got {frame!r}")
 
 
-def _angle_coefficients(theta, order: int) -> list[tuple[Float[Array, "*p"], Float[Array, "*p"]]]:
+def _angle_coefficients(
+    theta, order: int, pair
+) -> list[tuple[Float[Array, "*p"], Float[Array, "*p"]]]:
     """``(sin t, 1 - cos t)`` at ``t = theta`` and their derivatives up to ``order`` (the
-    coefficient of ``B0`` is 1, and 0 in every derivative)."""
-    st, ct = jnp.sin(theta), jnp.cos(theta)
-    # 1 - cos t as 2 sin^2(t / 2), which keeps its relative precision near straight.
-    vers = 2.0 * jnp.sin(0.5 * theta) ** 2
+    coefficient of ``B0`` is 1, and 0 in every derivative); ``pair`` computes sines and cosines
+    (:func:`pacjax._model.trig.sin_cos_versine`)."""
+    st, ct, vers = sin_cos_versine(theta, pair)
     return [(st, vers), (ct, st), (-st, ct)][: order + 1]
 
 
@@ -147,11 +150,22 @@ class PlanarCurvature(StrainModel):
 
     frame: str = eqx.field(static=True, default="torsion_free")
     phi_stiffness: float | None = eqx.field(static=True, default=None)
+    # Sines and cosines as fused arithmetic instead of library calls (pacjax._model.trig):
+    # faster to run, slower to compile; the dynamics turns it on (fused_trig()).
+    fused_trig: bool = eqx.field(static=True, default=False)
 
     def __check_init__(self):
         _check_frame(self.frame)
         if self.phi_stiffness is not None and not self.phi_stiffness >= 0:
             raise ValueError(f"phi_stiffness must be >= 0, got {self.phi_stiffness}")
+
+    def sincos(self, x):
+        """``(sin x, cos x)`` in the form :attr:`fused_trig` chooses."""
+        return sincos(x) if self.fused_trig else library_sincos(x)
+
+    def with_fused_trig(self) -> "PlanarCurvature":
+        """The same model with :attr:`fused_trig` on."""
+        return dataclasses.replace(self, fused_trig=True)
 
     def phi_stiffness_factor(self) -> float:
         """Factor on ``GJ / L`` giving the stiffness on ``phi``.
@@ -209,16 +223,16 @@ class PlanarCurvature(StrainModel):
         in the plane at angle ``phi``."""
         # Entry by entry: the energy's automatic derivatives (the residual, and its Jacobian at
         # a solution) run faster through this than through the matrices of the jet.
-        ct, st = jnp.cos(theta), jnp.sin(theta)
-        cp, sp = jnp.cos(phi), jnp.sin(phi)
+        st, ct, versine = sin_cos_versine(theta, self.sincos)
+        sp, cp = self.sincos(phi)
         zero = jnp.zeros_like(theta)
         tangent = jnp.stack([cp * st, sp * st, ct], axis=-1)
         if self.frame == "paper":
             rows = [[cp * ct, -sp + zero, cp * st], [sp * ct, cp + zero, sp * st], [-st, zero, ct]]
         else:
-            # Rz(phi) Ry(theta) Rz(-phi), with (cos theta - 1) written as -2 sin^2(theta / 2)
-            # so that it keeps its relative precision near the straight configuration.
-            vers = -2.0 * jnp.sin(0.5 * theta) ** 2
+            # Rz(phi) Ry(theta) Rz(-phi), with cos theta - 1 from the versine, which keeps its
+            # relative precision near the straight configuration.
+            vers = -versine
             rows = [
                 [1.0 + cp * cp * vers, cp * sp * vers, cp * st],
                 [cp * sp * vers, 1.0 + sp * sp * vers, sp * st],
@@ -240,7 +254,7 @@ class PlanarCurvature(StrainModel):
         """
         rot = self.plane_rotation_tangent(theta, phi)[0]
         basis = self.rotation_basis(phi, order)
-        trig = _angle_coefficients(theta, order)
+        trig = _angle_coefficients(theta, order, self.sincos)
 
         def combine(n, m):  # d^n / d theta^n d^m / d phi^m, (n, m) != (0, 0)
             # Written out, not a reduction over the three matrices: one elementwise loop.
@@ -254,7 +268,7 @@ class PlanarCurvature(StrainModel):
     def rotation_basis(self, phi: Float[Array, ""], order: int) -> Float[Array, "m 3 3 3"]:
         """``B[m, j]``: the ``m``-th derivative along ``phi`` (``m <= order``) of the matrix
         ``B_j`` of :meth:`plane_rotation_jet`."""
-        cp, sp = jnp.cos(phi), jnp.sin(phi)
+        sp, cp = self.sincos(phi)
         zero, one = jnp.zeros_like(cp), jnp.ones_like(cp)
         if self.frame == "paper":
             # Rz(phi) Ry(theta), with Ry(theta) = I + sin(theta) S + (1 - cos theta) S^2 and
@@ -293,7 +307,8 @@ class PlanarCurvature(StrainModel):
             return jnp.stack([zero, c, zero])
         phi = q[-2]
         # R = Rz(phi) Ry(alpha) Rz(-phi): bending about the fixed axis (-sin phi, cos phi, 0).
-        return jnp.stack([-c * jnp.sin(phi), c * jnp.cos(phi), zero])
+        sp, cp = self.sincos(phi)
+        return jnp.stack([-c * sp, c * cp, zero])
 
     def stiffness_scale(self, diagonal):
         # The force on the bending-plane angle is a bending moment times the curvature: scale
@@ -313,7 +328,7 @@ class PlanarCurvature(StrainModel):
             return 0.5 * k_phi * q[-2] ** 2
         # A regulariser on the bending-plane angle: same curvature at phi = 0 as 1/2 k phi^2,
         # but periodic, so phi and phi + 2 pi stay the same configuration.
-        return k_phi * (1.0 - jnp.cos(q[-2]))
+        return k_phi * (1.0 - self.sincos(q[-2])[1])
 
 
 class PCC(PlanarCurvature):
