@@ -151,7 +151,7 @@ class PlanarCurvature(StrainModel):
     frame: str = eqx.field(static=True, default="torsion_free")
     phi_stiffness: float | None = eqx.field(static=True, default=None)
     # Sines and cosines as fused arithmetic instead of library calls (pacjax._model.trig):
-    # faster to run, slower to compile; the dynamics turns it on (fused_trig()).
+    # faster to run, slower to compile; pacjax.simulate turns it on for the scene it integrates.
     fused_trig: bool = eqx.field(static=True, default=False)
 
     def __check_init__(self):
