@@ -3,17 +3,16 @@
 XLA:CPU evaluates a float64 ``sin`` or ``cos`` as a call into the C library, one element at a
 time, inside otherwise vectorised loops. The kinematics of PCC and PAC take the sine and cosine
 of every bending and plane angle at every knot, and their derivatives take them again, so those
-calls were the largest single cost of a dynamics vector field and a large one of a statics step
-(profiles in ``benchmarks/RESULTS.md``). :func:`sincos` computes the pair in float64 with the
+calls were the largest single cost of a dynamics vector field (profile in
+``benchmarks/RESULTS.md``). :func:`sincos` computes the pair in float64 with the
 classical reduction and polynomials, which XLA compiles into the surrounding fused loop, and its
 derivative reuses the pair instead of computing it again. Other precisions take ``jnp.sin`` and
 ``jnp.cos``, whose float32 forms XLA already writes as vectorised polynomials.
 
-The polynomials make a program larger: a statics solve, whose steps are few and whose sines are a
-small part of each, compiled a fifth longer with them and ran no faster, while the dynamics, which
-evaluates its vector field thousands of times, ran half as fast again. So the strain models use
-the library's by default, and :func:`pacjax.simulate` turns the fused ones on for the scenes it
-integrates (``PlanarCurvature.fused_trig``).
+The polynomials make a program larger and slower to compile. A statics solve runs its program a
+few times and gains nothing from them; a simulation runs its vector field thousands of times.
+So the strain models use the library's by default, and :func:`pacjax.simulate` turns the fused
+ones on for the scenes it integrates (``PlanarCurvature.fused_trig``).
 
 The method (as in fdlibm and Cephes): ``x = j pi/2 + r`` with ``j`` the nearest integer to
 ``x / (pi/2)`` and ``r`` in ``[-pi/4, pi/4]``, computed with ``pi/2`` split into three parts
@@ -57,7 +56,7 @@ def _sincos64(x):
     s = r + r * z * ps
     c = 1.0 + z * pc
     # The quadrant j mod 4: odd ones swap sine and cosine, and the bits of j and j + 1 sign them.
-    k = j.astype(jnp.int64 if x.dtype == jnp.float64 else jnp.int32)
+    k = j.astype(jnp.int64)
     odd = (k & 1) == 1
     sin = jnp.where(odd, c, s) * jnp.where((k & 2) == 0, 1.0, -1.0)
     cos = jnp.where(odd, s, c) * jnp.where(((k + 1) & 2) == 0, 1.0, -1.0)
