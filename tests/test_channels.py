@@ -167,6 +167,7 @@ def test_structured_hessian_with_channels_and_rings(model, dtype):
         np.testing.assert_allclose(hess, ref_hess, atol=tol * scale)
 
 
+@pytest.mark.slow  # a convergence study (~25-35 s): CI's slow step
 def test_tentacle_preset_solves_and_rings_converge_to_its_channels():
     controls = jnp.asarray([[4.0, 1.0], [2.0, 6.0]])
     channel = pj.presets.tentacle()

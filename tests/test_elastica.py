@@ -214,6 +214,7 @@ def test_large_deflection_matches_elastica(alpha, beta):
     assert bool(eq.stable)
 
 
+@pytest.mark.slow  # a convergence study (~25-35 s): CI's slow step
 def test_segment_chaining_converges():
     """The same rod as 1, 2 and 4 segments: the answers converge (to the elastica) as segments
     are added, and in the linear regime, where the exact curvature is a polynomial every split
