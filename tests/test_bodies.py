@@ -6,6 +6,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from marks import slow
 from scipy.integrate import quad, solve_ivp
 from scipy.optimize import brentq
 
@@ -110,6 +111,7 @@ def test_axial_stiffness_of_a_linear_taper_under_an_end_load():
     np.testing.assert_allclose(tip[0] - LENGTH, expected, rtol=1e-9)
 
 
+@pytest.mark.slow  # an accuracy study against a closed form (~18 s): CI's slow step
 def test_tapered_cantilever_small_load_against_the_closed_form():
     force = 1e-6  # tip deflection ~1e-4 of the length: linear theory to ~1e-8
     scene = pj.Scene(
@@ -192,7 +194,9 @@ def test_a_pre_curved_segment_with_no_load_stays_at_rest(name):
 
 
 @pytest.mark.parametrize(
-    "model", [pj.PCC(), pj.PAC(), pj.PolynomialCurvature(2)], ids=["PCC", "PAC", "Poly2"]
+    "model",
+    [slow(pj.PCC()), pj.PAC(), slow(pj.PolynomialCurvature(2))],
+    ids=["PCC", "PAC", "Poly2"],
 )
 def test_pure_end_moment_on_a_pre_curved_segment_gives_the_circle(model):
     ei, length, kappa0, moment = 0.02, 0.15, 4.0, 0.004  # kappa0 in 1/m
@@ -281,7 +285,7 @@ def _two_segments(extensible=True, rest=(None, None)):
     "models",
     [
         (pj.PAC(), pj.PCC()),
-        (pj.PolynomialCurvature(1), pj.PolynomialCurvature(0)),
+        slow((pj.PolynomialCurvature(1), pj.PolynomialCurvature(0))),
         (pj.PolynomialCurvature(1), pj.PCC()),
     ],
     ids=["PAC+PCC", "Poly1+Poly0", "Poly1+PCC"],
@@ -359,6 +363,7 @@ def test_batch_equals_single_solves_with_mixed_models(models):
         )
 
 
+@pytest.mark.slow  # a limit study (~15 s): CI's slow step
 def test_inextensible_is_the_limit_of_axial_stiffness_and_has_one_coordinate_fewer():
     loads = [pj.Gravity(), pj.PointMass(0.05, 1)]
     rigid = pj.Scene(_two_segments(extensible=False), pj.PAC(), loads=loads)

@@ -19,6 +19,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from marks import slow
 
 import pacjax as pj
 
@@ -723,7 +724,9 @@ def test_elastic_hessian_at_straight_is_the_hankel_form():
 
 
 @pytest.mark.parametrize(
-    "model", [pj.PAC(), pj.PCC(), pj.PAC(frame="paper"), pj.PCC(frame="paper")], ids=repr
+    "model",
+    [pj.PAC()] + [slow(m) for m in (pj.PCC(), pj.PAC(frame="paper"), pj.PCC(frame="paper"))],
+    ids=repr,
 )
 def test_closed_form_plane_frames_match_the_magnus_path(model, monkeypatch):
     """PCC and PAC bend in one plane per segment, and the kinematics takes their closed-form
@@ -788,9 +791,8 @@ _linearisations = eqx.filter_jit(
 
 
 @pytest.mark.parametrize(
-    "model", [pj.PAC(), pj.PCC(frame="paper"), pj.PolynomialCurvature(2)], ids=repr
+    "model", [pj.PAC(), pj.PCC(frame="paper"), slow(pj.PolynomialCurvature(2))], ids=repr
 )
-@pytest.mark.long(minutes=0.8)
 def test_follower_force_jacobian_as_dead_force_plus_turning_is_the_autodiff_one(model):
     """Follower forces only: the Jacobian from the dead-force Hessian plus the turning of the
     forces (``follower_jacobian``) equals ``jax.jacfwd`` of the residual, and the residual and
@@ -922,9 +924,9 @@ def _knot_frame_derivatives(model, q, length, knots, node_weights, lam):
     "model",
     [
         pj.PAC(),
-        pj.PAC(frame="paper"),
-        pj.PCC(),
-        pj.PolynomialCurvature(order=1, twist=True),
+        slow(pj.PAC(frame="paper")),
+        slow(pj.PCC()),
+        slow(pj.PolynomialCurvature(order=1, twist=True)),
     ],
     ids=repr,
 )

@@ -5,6 +5,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
+import pytest
 
 import pacjax as pj
 from pacjax._model.inputs import static_load_sites
@@ -77,6 +78,7 @@ def test_follower_force_residual_is_the_same_under_jit():
     np.testing.assert_allclose(jitted, eager, rtol=1e-13, atol=1e-13 * np.abs(eager).max())
 
 
+@pytest.mark.slow  # hard rows of a follower-loaded robot (~23 s): CI's slow step
 def test_follower_rows_of_the_paper_robot_converge_in_few_steps():
     # Commands of the paper's robot (PAC) under the 3.41 N tip follower force that used to
     # crawl: with |r|^2 as the merit, the continuation's steps were cut by the line search for

@@ -5,6 +5,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from marks import slow
 
 import pacjax as pj
 from pacjax._statics.problem import ScaledProblem
@@ -112,7 +113,7 @@ def test_models_without_a_free_plane_angle_start_where_asked(model):
     assert np.all(_aligned(scene, _pull(1, 2)) == 0.0)
 
 
-@pytest.mark.parametrize("model", [pj.PCC(), pj.PAC()], ids=["PCC", "PAC"])
+@pytest.mark.parametrize("model", [pj.PCC(), slow(pj.PAC())], ids=["PCC", "PAC"])
 def test_aligned_start_reaches_the_same_equilibria_in_fewer_steps(model):
     scene = pj.presets.stella2023(model, tip_mass=0.2)
     commands = random_commands(24, seed=3)
@@ -218,7 +219,7 @@ def _newton_models(problem, y):
     return jac, (problem.row / problem.sigma)[:, None] * along, jax.jacfwd(problem.residual)(y)
 
 
-@pytest.mark.parametrize("model", [pj.PCC(), pj.PAC()], ids=["PCC", "PAC"])
+@pytest.mark.parametrize("model", [pj.PCC(), slow(pj.PAC())], ids=["PCC", "PAC"])
 def test_the_newton_model_is_the_energy_along_the_moves(model):
     # A conservative PCC/PAC scene's Jacobian is the Hessian of E(moved(y, dy)) at dy = 0, not
     # the polar one, except on a segment whose end angle is mostly cancelled (an S of PAC),
@@ -260,6 +261,7 @@ def test_other_models_step_to_y_plus_dy():
         np.testing.assert_array_equal(problem.moved(jnp.asarray(y), jnp.asarray(dy)), y + dy)
 
 
+@pytest.mark.slow
 def test_the_bending_vector_step_reaches_the_same_equilibria_in_fewer_steps(monkeypatch):
     scene = pj.presets.stella2023(pj.PAC(), tip_mass=0.2)
     commands = random_commands(32, seed=5)

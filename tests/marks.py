@@ -1,0 +1,10 @@
+"""Marks shared by the test files."""
+
+import pytest
+
+
+def slow(value):
+    """A parametrization for CI's slow step (``-m slow``): where a comparison runs over several
+    strain models or frames, the default step keeps one of them (each compiles programs of its
+    own, tens of seconds) and the slow step checks the rest."""
+    return pytest.param(value, marks=pytest.mark.slow)
