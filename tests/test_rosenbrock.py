@@ -16,7 +16,7 @@ from pacjax._dynamics.equations import (
     vector_field,
     vector_field_jacobian,
 )
-from pacjax._dynamics.rosenbrock import Rosenbrock23, forward_differences
+from pacjax._dynamics.rosenbrock import Rosenbrock23, forward_differences, secant_update
 from pacjax._model.inertia import mass_matrix
 from pacjax._model.inputs import as_traced_leaves
 
@@ -145,6 +145,33 @@ def test_held_jacobian_serves_several_steps():
         Rosenbrock23(reuse=0)
     with pytest.raises(ValueError, match="jacobian"):
         Rosenbrock23(jacobian="finite")
+
+
+def test_secant_correction_maps_the_step_and_keeps_the_rest():
+    rng = np.random.default_rng(0)
+    jac, dy, df = rng.normal(size=(4, 4)), rng.normal(size=4), rng.normal(size=4)
+    corrected = secant_update(jnp.asarray(jac), jnp.asarray(dy), jnp.asarray(df))
+    np.testing.assert_allclose(corrected @ dy, df, rtol=1e-13, atol=1e-13)
+    across = np.linalg.svd(dy[None])[2][1:]  # directions orthogonal to the step
+    np.testing.assert_allclose(corrected @ across.T, jac @ across.T, rtol=1e-13, atol=1e-13)
+    unmoved = secant_update(jnp.asarray(jac), jnp.zeros(4), jnp.asarray(df))
+    np.testing.assert_array_equal(unmoved, jac)
+
+
+def test_secant_correction_lets_a_held_jacobian_take_longer_steps():
+    """A Jacobian held for 20 steps, with and without the correction along each step: the same
+    motion, and the correction saves steps (the error estimate of a stale ``J`` is larger)."""
+    sols = {
+        secant: _van_der_pol_end(
+            Rosenbrock23(jacobian="differences", reuse=20, secant=secant), mu=1000.0, t1=3000.0
+        )
+        for secant in (False, True)
+    }
+    for sol in sols.values():
+        assert sol.result == diffrax.RESULTS.successful
+    np.testing.assert_allclose(sols[True].ys[0], sols[False].ys[0], atol=1e-3)
+    steps = {k: int(sol.stats["num_steps"]) for k, sol in sols.items()}
+    assert steps[True] < steps[False], steps
 
 
 def test_error_weight_scales_the_error_estimate():

@@ -34,6 +34,20 @@ solver state meanwhile. On one trajectory that makes an exact Jacobian (dear: on
 per state coordinate) affordable; in a ``vmap``-ped batch the choice between making it and
 holding it becomes a select, so every step makes it, and a batch wants ``reuse=1`` with a
 cheap ``J``.
+
+A held ``J`` ages as the state moves, and the error estimate feels it: with ``J`` not the
+Jacobian the estimate's leading term is of second order, ``(J - df/dy)`` applied along the
+motion, so a stale ``J`` shrinks the steps. After each accepted step the held ``J`` therefore
+takes Broyden's rank-one correction,
+
+    J <- J + (dF - J dy) dy^T / (dy^T dy),   dy = y1 - y0,  dF = F2 - F0,
+
+which makes it map the step just taken to the change of the vector field along it: exact, to
+first order, in the direction the next step takes, the one the error estimate weighs. It costs
+an outer product of vectors the step has already; the rows of ``qdot`` (zero and identity) are
+left as they are, since they map every step exactly. A fresh ``J`` is still made every
+``reuse`` steps: the correction fixes one direction a step, and a ``J`` that only takes
+corrections drifts in the others.
 """
 
 import math
@@ -63,6 +77,8 @@ class Rosenbrock23(diffrax.AbstractAdaptiveSolver):
             zero. Its forward derivative in ``t`` is then left out: it traced the whole vector
             field once more per step.
         reuse: accepted steps one Jacobian serves (1: a new one every step; see the module).
+        secant: with ``reuse > 1``, the held Jacobian takes Broyden's rank-one correction along
+            each accepted step (see the module).
         error_weight: ``(y, args) -> w``, a pytree like ``y``: the error estimate is multiplied
             by ``w`` before the step-size controller scales it, so that a coordinate whose error
             moves the body less than its size suggests (the plane angle of a nearly straight
@@ -77,6 +93,7 @@ class Rosenbrock23(diffrax.AbstractAdaptiveSolver):
     jacobian: Callable | str | None = eqx.field(static=True, default=None)
     autonomous: bool = eqx.field(static=True, default=False)
     reuse: int = eqx.field(static=True, default=1)
+    secant: bool = eqx.field(static=True, default=True)
     error_weight: Callable | None = eqx.field(static=True, default=None)
 
     def __check_init__(self):
@@ -172,8 +189,19 @@ class Rosenbrock23(diffrax.AbstractAdaptiveSolver):
             error = jax.tree.map(jnp.multiply, error, weight)
         y1 = unravel(x1)
         dense_info = dict(y0=y0, y1=y1, k0=unravel(h * f0), k1=unravel(h * f2))
+        if held is not None and self.secant:
+            jac = secant_update(jac, x1 - x0, f2 - f0)
         state = f2_tree if held is None else (f2_tree, jac, age)
         return y1, error, dense_info, state, diffrax.RESULTS.successful
+
+
+def secant_update(jac, dy, df):
+    """Broyden's rank-one correction of ``jac`` to map ``dy`` to ``df`` (none for ``dy = 0``);
+    held fixed under differentiation, as ``W`` is."""
+    dy, df = jax.lax.stop_gradient((dy, df))
+    norm = jnp.dot(dy, dy)
+    safe = jnp.where(norm > 0, norm, 1.0)
+    return jac + jnp.where(norm > 0, 1.0, 0.0) * jnp.outer(df - jac @ dy, dy / safe)
 
 
 def forward_differences(f: Callable, x: jax.Array, fx: jax.Array) -> jax.Array:

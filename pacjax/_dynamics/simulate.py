@@ -362,9 +362,10 @@ def rosenbrock23(jacobian: str = "exact", reuse: int | None = None) -> Rosenbroc
     Args:
         jacobian: ``"exact"``: the vector field's Jacobian by differences
             (:func:`pacjax._dynamics.rosenbrock.forward_differences`), one per ``reuse``
-            accepted steps (default :data:`JACOBIAN_REUSE`): dear (a vector field per state
-            coordinate) but it holds the inertia's fast part, so the steps are several times
-            fewer. ``"stiff"``: :meth:`EquationsOfMotion.stiff_jacobian`, the forces'
+            accepted steps (default :data:`JACOBIAN_REUSE`), corrected along each step between
+            them (Broyden's update, :class:`Rosenbrock23`'s ``secant``): dear (a vector field
+            per state coordinate) but it holds the inertia's fast part, so the steps are several
+            times fewer. ``"stiff"``: :meth:`EquationsOfMotion.stiff_jacobian`, the forces'
             derivatives with the inertia held, cheap enough to make every step (default
             ``reuse=1``): :func:`pacjax.simulate_batch`'s choice, since a ``vmap``-ped batch
             cannot skip making a held Jacobian (:mod:`pacjax._dynamics.rosenbrock`).
