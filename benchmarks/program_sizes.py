@@ -13,8 +13,8 @@ the traces of inner functions, so it understates a fresh process's: ``first_run.
 those).
 """
 
+import argparse
 import json
-import sys
 import time
 
 import equinox as eqx
@@ -117,4 +117,6 @@ def main(out_path: str | None = None) -> dict:
 
 
 if __name__ == "__main__":
-    main(sys.argv[1] if len(sys.argv) > 1 else None)
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("out", nargs="?", help="write the sizes to this JSON file")
+    main(parser.parse_args().out)
