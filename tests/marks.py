@@ -3,8 +3,8 @@
 import pytest
 
 
-def slow(value):
+def slow(*values):
     """A parametrization for CI's slow step (``-m slow``): where a comparison runs over several
     strain models or frames, the default step keeps one of them (each compiles programs of its
     own, tens of seconds) and the slow step checks the rest."""
-    return pytest.param(value, marks=pytest.mark.slow)
+    return pytest.param(*values, marks=pytest.mark.slow)

@@ -8,6 +8,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from marks import slow
 
 import pacjax as pj
 from pacjax._model.hessian import energy_derivatives
@@ -142,7 +143,7 @@ def test_straight_channel_is_the_ring_model_at_rest_and_its_limit_in_a_bend():
 @pytest.mark.parametrize(
     "model, dtype",
     [(pj.PAC(), jnp.float64), (pj.PAC(), jnp.float32)]
-    + [pytest.param(m, jnp.float64, marks=pytest.mark.slow) for m in MODELS if m != pj.PAC()],
+    + [slow(m, jnp.float64) for m in MODELS if m != pj.PAC()],
     ids=lambda x: type(x).__name__ if isinstance(x, pj.StrainModel) else jnp.dtype(x).name,
 )
 def test_structured_hessian_with_channels_and_rings(model, dtype):
