@@ -200,8 +200,7 @@ def secant_update(jac, dy, df):
     held fixed under differentiation, as ``W`` is."""
     dy, df = jax.lax.stop_gradient((dy, df))
     norm = jnp.dot(dy, dy)
-    safe = jnp.where(norm > 0, norm, 1.0)
-    return jac + jnp.where(norm > 0, 1.0, 0.0) * jnp.outer(df - jac @ dy, dy / safe)
+    return jac + jnp.outer(df - jac @ dy, dy / jnp.where(norm > 0, norm, 1.0))
 
 
 def forward_differences(f: Callable, x: jax.Array, fx: jax.Array) -> jax.Array:
