@@ -960,10 +960,11 @@ def test_structured_hessian_with_written_out_tendon_chords_is_the_autodiff_one(m
 # ------------------------------------------------------------------------------ rotations
 @pytest.mark.parametrize("dtype", [jnp.float64, jnp.float32], ids=["float64", "float32"])
 def test_rotation_primitives_against_the_exponential_series_and_smooth_at_zero(dtype):
-    """``exp_so3``, ``cross3`` and ``hat`` on rotation vectors (zero, on
+    """``exp_so3``, ``rotate_ez``, ``cross3`` and ``hat`` on rotation vectors (zero, on
     both sides of the kernels' series threshold, large) against the exponential series and
-    ``np.cross``; the first and second derivatives of ``exp_so3`` at zero against the series."""
-    from pacjax._model.rotation import cross3, exp_so3, hat
+    ``np.cross``; the first and second derivatives of ``exp_so3`` at zero against the series,
+    and ``rotate_ez``'s everywhere against those of ``exp_so3``'s third column."""
+    from pacjax._model.rotation import cross3, exp_so3, hat, rotate_ez
 
     def expm(k):
         term, total = np.eye(3), np.eye(3)
@@ -1005,3 +1006,9 @@ def test_rotation_primitives_against_the_exponential_series_and_smooth_at_zero(d
     np.testing.assert_allclose(first, np.moveaxis(generators, 0, -1), rtol=0, atol=tol)
     products = np.einsum("jab,kbc->acjk", generators, generators)
     np.testing.assert_allclose(second, 0.5 * (products + np.swapaxes(products, 2, 3)), atol=tol)
+    # exp([w]x) e_z written out, with its first and second derivatives, at every w above.
+    w = jnp.asarray(omegas, dtype)
+    for fn in (lambda x: x, jax.jacfwd, jax.hessian):
+        ez_col = jax.vmap(fn(lambda x: exp_so3(x)[:, 2]))(w)
+        np.testing.assert_allclose(jax.vmap(fn(rotate_ez))(w), ez_col, rtol=0, atol=tol)
+    np.testing.assert_allclose(rotate_ez(w), reference[:, :, 2], rtol=0, atol=tol)

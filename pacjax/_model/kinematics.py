@@ -30,7 +30,7 @@ from jaxtyping import Array, Float
 
 from .._config import MATMUL_PRECISION
 from .quadrature import gauss_legendre
-from .rotation import cross3, exp_so3, matmul3, matvec3, rotate
+from .rotation import cross3, exp_so3, matmul3, matvec3, rotate_ez
 from .strain import StrainModel
 
 _C1 = 0.5 - math.sqrt(3.0) / 6.0
@@ -297,8 +297,7 @@ def segment_knot_frames(
     widths = jnp.concatenate([h, (h[:, None] * nodes[None, :]).reshape(-1)])
     omegas = jax.vmap(lambda a_, h_: _magnus_step(model, q, a_, h_))(starts, widths)
     steps = jax.vmap(exp_so3)(omegas[:n_int])
-    ez = jnp.asarray([0.0, 0.0, 1.0], dtype)
-    node_dirs = jax.vmap(lambda o: rotate(o, ez))(omegas[n_int:]).reshape(n_int, len(nodes), 3)
+    node_dirs = rotate_ez(omegas[n_int:]).reshape(n_int, len(nodes), 3)
 
     base = model.base_rotation(q)
     first = jnp.eye(3, dtype=dtype) if base is None else base

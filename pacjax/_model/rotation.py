@@ -73,12 +73,18 @@ def rot_z(angle: Float[Array, ""]) -> Float[Array, "3 3"]:
     )
 
 
-def rotate(omega: Float[Array, "3"], v: Float[Array, "3"]) -> Float[Array, "3"]:
-    """``exp([omega]x) v`` without forming the matrix."""
-    a, b = _exp_kernels(omega[0] ** 2 + omega[1] ** 2 + omega[2] ** 2)
-    w = cross3(omega, v)
-    ww = cross3(omega, w)
-    return jnp.stack([v[k] + a * w[k] + b * ww[k] for k in range(3)])
+def rotate_ez(omega: Float[Array, "*p 3"]) -> Float[Array, "*p 3"]:
+    """``exp([omega]x) e_z`` for a stack of rotation vectors, without forming the matrices.
+
+    Written out for ``e_z``: a general ``exp([omega]x) v`` multiplies by the known zeros and ones
+    of ``v``, and its first and second derivatives keep those products (XLA does not fold a
+    float times zero): the position nodes' Hessians in the structured energy Hessian were most
+    of a ``PolynomialCurvature`` linearisation's time.
+    """
+    x, y, z = omega[..., 0], omega[..., 1], omega[..., 2]
+    a, b = _exp_kernels(x * x + y * y + z * z)
+    # omega x e_z = (y, -x, 0); omega x (omega x e_z) = (x z, y z, -(x^2 + y^2)).
+    return jnp.stack([a * y + b * x * z, b * y * z - a * x, 1.0 - b * (x * x + y * y)], axis=-1)
 
 
 def matmul3(a: Float[Array, "*b 3 3"], b: Float[Array, "*b 3 3"]) -> Float[Array, "*b 3 3"]:
