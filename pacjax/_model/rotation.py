@@ -52,17 +52,16 @@ def cross3(a, b):
 
 
 def exp_so3(omega: Float[Array, "3"]) -> Float[Array, "3 3"]:
-    """Rotation matrix ``exp([omega]x)`` (Rodrigues' formula)."""
-    x, y, z = omega[0], omega[1], omega[2]
-    a, b = _exp_kernels(x * x + y * y + z * z)
-    bx, by, bz = b * x, b * y, b * z
-    return jnp.stack(
-        [
-            jnp.stack([1.0 - by * y - bz * z, bx * y - a * z, bx * z + a * y]),
-            jnp.stack([bx * y + a * z, 1.0 - bx * x - bz * z, by * z - a * x]),
-            jnp.stack([bx * z - a * y, by * z + a * x, 1.0 - bx * x - by * y]),
-        ]
-    )
+    """Rotation matrix ``exp([omega]x)`` (Rodrigues' formula).
+
+    As ``(1 - b |w|^2) I + b w w^T + a [w]x`` (``[w]x^2 = w w^T - |w|^2 I``): the identity and
+    the outer product broadcast, where nine entries written one by one are stacked into the
+    matrix, and their derivatives sliced apart again.
+    """
+    sq = omega[0] * omega[0] + omega[1] * omega[1] + omega[2] * omega[2]
+    a, b = _exp_kernels(sq)
+    eye = jnp.eye(3, dtype=omega.dtype)
+    return (1.0 - b * sq) * eye + b * omega[:, None] * omega[None, :] + a * hat(omega)
 
 
 def rot_z(angle: Float[Array, ""]) -> Float[Array, "3 3"]:
