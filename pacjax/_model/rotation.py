@@ -55,8 +55,8 @@ def exp_so3(omega: Float[Array, "3"]) -> Float[Array, "3 3"]:
     """Rotation matrix ``exp([omega]x)`` (Rodrigues' formula).
 
     As ``(1 - b |w|^2) I + b w w^T + a [w]x`` (``[w]x^2 = w w^T - |w|^2 I``): the identity and
-    the outer product broadcast, where nine entries written one by one are stacked into the
-    matrix, and their derivatives sliced apart again.
+    the outer product broadcast, rather than nine entries stacked one by one into the matrix,
+    whose derivatives are sliced apart again.
     """
     sq = omega[0] * omega[0] + omega[1] * omega[1] + omega[2] * omega[2]
     a, b = _exp_kernels(sq)
@@ -78,8 +78,8 @@ def rotate_ez(omega: Float[Array, "*p 3"]) -> Float[Array, "*p 3"]:
 
     Written out for ``e_z``: a general ``exp([omega]x) v`` multiplies by the known zeros and ones
     of ``v``, and its first and second derivatives keep those products (XLA does not fold a
-    float times zero): the position nodes' Hessians in the structured energy Hessian were most
-    of a ``PolynomialCurvature`` linearisation's time.
+    float times zero), while the position nodes' second derivatives are a large part of a
+    ``PolynomialCurvature`` linearisation.
     """
     x, y, z = omega[..., 0], omega[..., 1], omega[..., 2]
     a, b = _exp_kernels(x * x + y * y + z * z)
