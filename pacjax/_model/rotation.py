@@ -31,9 +31,10 @@ def _exp_kernels(theta_sq: Float[Array, ""]) -> tuple[Float[Array, ""], Float[Ar
     small = theta_sq < _SERIES_THRESHOLD
     safe_sq = jnp.where(small, jnp.ones_like(theta_sq), theta_sq)
     theta = jnp.sqrt(safe_sq)
-    half_sin = jnp.sin(0.5 * theta)
+    half = 0.5 * theta
+    half_sin = jnp.sin(half)
     # sin t = 2 sin(t/2) cos(t/2): one angle, whose sine and cosine XLA computes together.
-    sinc = 2.0 * half_sin * jnp.cos(0.5 * theta) / theta
+    sinc = 2.0 * half_sin * jnp.cos(half) / theta
     # 1 - cos t = 2 sin^2(t/2) avoids the cancellation that ruins float32 near 0.
     cosc = 2.0 * half_sin * half_sin / safe_sq
     t2 = theta_sq
