@@ -6,7 +6,16 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from scene_space import PropertyFailure, Structure, build, check, is_validation_error, values
+from scene_space import (
+    SAME_TIP,
+    PropertyFailure,
+    Structure,
+    build,
+    check,
+    is_validation_error,
+    require_same_tip,
+    values,
+)
 
 #: Small structures (each one compilation) that still cross the space: a mixed PAC/PCC robot
 #: with masses at odd counts, ring and channel tendons in both modes and a follower force; an
@@ -128,3 +137,34 @@ def test_a_validation_error_is_told_from_a_crash():
         jnp.einsum("ij,jk->ik", jnp.ones((2, 3)), jnp.ones((4, 2)))
     assert not is_validation_error(crashed.value)
     assert not is_validation_error(PropertyFailure("a broken property"))
+
+
+def test_batch_and_single_are_compared_at_the_equilibrium_their_tolerance_leaves():
+    """A batch row and its single solve may stop at different points inside the tolerance's
+    ball (their paths differ where rounding picks another step); on a soft body that ball is
+    wider in position than ``SAME_TIP``. One Newton step from each brings them together; two
+    different equilibria stay apart."""
+    import jax.numpy as jnp
+
+    import pacjax as pj
+
+    def scene_with(gravity):
+        # Soft, as the campaign's case (EI 5e-4 N m^2), with a lumped mass at the tip.
+        segments = [pj.Segment(0.2, 5e-4, 100.0, linear_density=0.05) for _ in range(2)]
+        loads = (pj.Gravity(9.81, np.asarray(gravity) / np.linalg.norm(gravity)),)
+        loads += (pj.PointMass(0.02, segment=1),)
+        return pj.Scene(pj.Robot(segments), pj.PAC(), loads=loads)
+
+    scene = scene_with((1.0, 0.0, -1.0))
+    controls = jnp.zeros(0)
+    eq = pj.solve_equilibrium(scene, controls)
+    assert bool(eq.successful)
+    shifted = eq.q * (1.0 + 1e-4)  # as far as the ball's edge on a softer body
+    gap = np.linalg.norm(pj.tip_pose(scene, shifted)[0] - pj.tip_pose(scene, eq.q)[0])
+    allowed = SAME_TIP["float64"] * float(scene.robot.total_length)
+    assert gap > 3 * allowed
+    require_same_tip(scene, controls, eq.q, shifted, "float64")
+
+    other = pj.solve_equilibrium(scene_with((1.0, 0.0, -0.9)), controls)
+    with pytest.raises(PropertyFailure, match="after a Newton step"):
+        require_same_tip(scene, controls, eq.q, other.q, "float64")
