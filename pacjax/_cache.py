@@ -19,6 +19,15 @@ therefore opt-in for library users, and entries are only written for programs th
 repeated with ``PACJAX_CACHE_DIR=off`` (the command line) or without the call; deleting the
 directory empties it.
 
+JAX does not store a program that calls back into Python, and diffrax checks a simulation's
+save times with equinox's runtime errors, which are such callbacks: with them every
+``pj.simulate`` compiles again in each new process. With ``EQX_ON_ERROR=nan`` (read by equinox
+as it is imported) those checks become a NaN in place of the error and the program is stored;
+pacjax checks the save times and the first step itself before compiling, and reads a failed
+integration from its result code, not from an exception. The command
+line sets it for its own process (:func:`enable_from_environment`); a library user sets it in
+the environment to have simulations stored too.
+
 This module imports only the standard library: the command line enables the cache before JAX
 is imported, through the environment variables JAX reads as it starts.
 """
@@ -104,10 +113,13 @@ def enable_compilation_cache(
 
 def enable_from_environment() -> Path | None:
     """The command line's default: the cache under ``$PACJAX_CACHE_DIR`` (default
-    ``~/.cache/pacjax-jax``), or none when it is ``off``; an unusable folder is a warning."""
+    ``~/.cache/pacjax-jax``), or none when it is ``off``; an unusable folder is a warning.
+    Unless the environment says otherwise, equinox's runtime errors become NaN
+    (``EQX_ON_ERROR=nan``, see the module) so that simulations are stored too."""
     root = os.environ.get("PACJAX_CACHE_DIR", str(DEFAULT_ROOT))
     if root.strip().lower() in OFF:
         return None
+    os.environ.setdefault("EQX_ON_ERROR", "nan")
     try:
         return enable_compilation_cache(root)
     except OSError as err:

@@ -17,6 +17,9 @@ Motion over time is in ``test_dynamics_motion.py``, gradients through a trajecto
 """
 
 import math
+import os
+import subprocess
+import sys
 
 import equinox as eqx
 import jax
@@ -194,6 +197,36 @@ def test_input_validation():
         pj.simulate(SCENE, (0.0, 1.0), damping=pj.Damping(tendon=jnp.ones(3)))
     with pytest.raises(TypeError, match="damping"):
         pj.simulate(SCENE, (0.0, 1.0), damping=0.1)
+    for dt0 in (-1e-3, 0.0, 2.0, float("nan")):
+        with pytest.raises(ValueError, match="dt0"):
+            pj.simulate(SCENE, (0.0, 1.0), dt0=dt0)
+
+
+def test_a_simulation_can_be_kept_in_the_compilation_cache():
+    """JAX's persistent cache stores no program that calls back into Python. diffrax checks the
+    save times with equinox's runtime errors, callbacks unless ``EQX_ON_ERROR=nan`` (which
+    the command line sets; equinox reads it as it is imported): then ``simulate``'s program
+    holds none."""
+    code = """
+import numpy as np, pacjax as pj
+from pacjax._dynamics import simulate as sim
+seg = pj.Segment(0.2, 1e-2, 1e3, linear_density=0.1)
+scene = pj.Scene(pj.Robot([seg]), pj.PCC(), loads=[pj.Gravity()])
+scene, damping, opts, span, ts = sim.prepare(
+    scene, 0.0, 0.1, None, None, None, sim.RTOL, sim.ATOL, 100, False, sim.PHI_INERTIA_FACTOR, None
+)
+q, u = np.zeros(scene.n_dofs), np.zeros(0)
+text = sim.integrate.lower(scene, damping, u, q, q, span, ts, None, opts).as_text()
+print(text.count("callback"))
+"""
+    counts = {}
+    for mode in ("raise", "nan"):
+        env = dict(os.environ, EQX_ON_ERROR=mode)
+        out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True)
+        assert out.returncode == 0, out.stderr
+        counts[mode] = int(out.stdout.split()[-1])
+    assert counts["raise"] > 0  # the check is real: diffrax's callbacks are there by default
+    assert counts["nan"] == 0
 
 
 @pytest.mark.slow  # a float32 copy of every dynamics program: CI's slow step

@@ -16,8 +16,11 @@ from .._statics.batch import check_devices, row_sharding
 from .._statics.pool import pad_rows
 from .damping import Damping
 from .simulate import (
+    ATOL,
+    RTOL,
     Trajectory,
     aligned_rest_start,
+    check_dt0,
     check_qdot,
     check_simulation_controls,
     check_span,
@@ -39,8 +42,8 @@ def simulate_batch(
     *,
     damping: Damping | None = None,
     solver: diffrax.AbstractSolver | None = None,
-    rtol: float = 1e-7,
-    atol: float = 1e-9,
+    rtol: float = RTOL,
+    atol: float = ATOL,
     dt0=None,
     max_steps: int = 100_000,
     phi_inertia: float = PHI_INERTIA_FACTOR,
@@ -128,7 +131,7 @@ def simulate_batch(
     sharding = row_sharding(n_devices)
     if sharding is not None:
         batched = jax.device_put(batched, sharding)
-    dt0 = None if dt0 is None else jnp.asarray(dt0, dtype)
+    dt0 = check_dt0(dt0, t0, t1, dtype)
     schedule = u if callable(u) else None
     traj = _simulate_rows(scene, damping, schedule, batched, span, ts, dt0, opts, group)
     return jtu.tree_map(lambda x: x[:b], traj)

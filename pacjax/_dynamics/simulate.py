@@ -116,6 +116,15 @@ class _Options(eqx.Module):
     adjoint: diffrax.AbstractAdjoint = eqx.field(static=True)
 
 
+#: :func:`simulate`'s default relative tolerance: what control, learning and animation need,
+#: and where the default solver, :func:`rosenbrock23`, is at its best; the paper's robot's tip
+#: then follows a reference a thousand times tighter to well under a tenth of a millimetre
+#: (``benchmarks/bench_dynamics.py``). A reference solution asks for ``rtol < ROSENBROCK_RTOL``.
+RTOL = 1e-4
+#: :func:`simulate`'s default absolute tolerance, in the state's SI units (m, rad, per second).
+ATOL = 1e-6
+
+
 def simulate(
     scene: Scene,
     t_span,
@@ -126,8 +135,8 @@ def simulate(
     *,
     damping: Damping | None = None,
     solver: diffrax.AbstractSolver | None = None,
-    rtol: float = 1e-7,
-    atol: float = 1e-9,
+    rtol: float = RTOL,
+    atol: float = ATOL,
     dt0=None,
     max_steps: int = 100_000,
     dense: bool = False,
@@ -156,6 +165,8 @@ def simulate(
             Jacobian). A non-stiff solver such as ``diffrax.Tsit5()`` only suits scenes without
             stiff tendons or damping.
         rtol, atol: tolerances of the adaptive step size (``atol`` in the state's SI units).
+            The defaults, :data:`RTOL` and :data:`ATOL`, take :func:`rosenbrock23`; pass
+            ``rtol < 1e-5`` for a reference solution (Kvaerno5, many times slower).
         dt0: first step (s); default chosen by the solver.
         max_steps: step limit (beyond it the trajectory's ``result`` is
             ``RESULTS.max_steps_reached``).
@@ -187,7 +198,7 @@ def simulate(
         scene, t0, t1, saveat, damping, solver, rtol, atol, max_steps, dense, phi_inertia, adjoint
     )
     q0 = aligned_rest_start(scene, controls, q0, qdot0, span[0])
-    dt0 = None if dt0 is None else jnp.asarray(dt0, dtype)
+    dt0 = check_dt0(dt0, t0, t1, dtype)
     return integrate(scene, damping, controls, q0, qdot0, span, ts, dt0, opts)
 
 
@@ -319,6 +330,16 @@ def aligned_rest_start(scene: Scene, controls, q0, qdot0, t0):
     problem = frozen(ScaledProblem.build(scene, jnp.asarray(u0, q0.dtype)))
     y = problem.aligned(jax.lax.stop_gradient(q0) / problem.sigma, 1e-10, keep=moving)
     return q0 + jax.lax.stop_gradient(problem.sigma * y - q0)
+
+
+def check_dt0(dt0, t0: float, t1: float, dtype):
+    """``dt0`` as an array of ``dtype`` (None stays None): a first step in ``(0, t1 - t0]``."""
+    if dt0 is None:
+        return None
+    step = np.asarray(dt0, dtype=float)
+    if step.shape != () or not (0.0 < float(step) <= t1 - t0):
+        raise ValueError(f"dt0 must be a first step in (0, t1 - t0 = {t1 - t0:g}] s, got {dt0!r}")
+    return jnp.asarray(step, dtype)
 
 
 def check_span(t_span) -> tuple[float, float]:
