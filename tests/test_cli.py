@@ -80,10 +80,11 @@ def test_solve_controls_override(tmp_path):
     assert data["tip"]["position"][1] < 0
 
 
-@pytest.mark.slow  # compiles the implicit integrator (Kvaerno5) for one segment
+@pytest.mark.slow  # compiles the dynamics for one segment
 def test_simulate_settles_on_the_solve_and_writes_its_files(tmp_path):
     """A step in tendon tensions, damped at the critical ratio of the lowest mode: after 1 s
-    the tip is where `pacjax solve` puts it, from 12.9 mm away (q within 7e-10 measured).
+    at the default tolerances the tip is where `pacjax solve` puts it (within a micrometre),
+    from 12.9 mm away.
     With the damping matrix fixed at the straight rest state (``K_0``), the bending-plane angle
     of the bent segment was undamped: the tip still swung by 0.03-0.3 mm after 2 s."""
     scene_file = SCENES / "tendon_single.toml"
@@ -94,6 +95,7 @@ def test_simulate_settles_on_the_solve_and_writes_its_files(tmp_path):
     assert result.exit_code == 0, result.output
     data = json.loads((tmp_path / "tendon_single_sim.json").read_text())
     assert data["success"] is True
+    assert (data["rtol"], data["atol"]) == (1e-4, 1e-6)  # pj.simulate's defaults
     assert data["t"] == pytest.approx(np.linspace(0.0, 1.0, 11).tolist())
     assert (tmp_path / "tendon_single_tip.png").read_bytes()[:8] == PNG_MAGIC
     assert (tmp_path / "tendon_single_sim.gif").read_bytes()[:6] in (b"GIF87a", b"GIF89a")
@@ -119,6 +121,7 @@ def test_simulate_settles_on_the_solve_and_writes_its_files(tmp_path):
         (["simulate", "{scene}", "--controls", "0.01,0"], 1, "2 value(s) but the scene has 3"),
         (["simulate", "{broken}"], 1, "tendons[0].segment: segment 5 does not exist"),
         (["simulate", "{scene}", "--duration", "0"], 2, "Invalid value for '--duration'"),
+        (["simulate", "{scene}", "--rtol", "0"], 2, "Invalid value for '--rtol'"),
     ],
 )
 def test_bad_input_one_line_no_traceback(tmp_path, args, code, message):
