@@ -82,6 +82,7 @@ def simulate_batch(
     check_scene(scene)
     dtype = solver_dtype(scene)
     t0, t1 = check_span(t_span)
+    dt0 = check_dt0(dt0, t0, t1, dtype)
     n, m = scene.n_dofs, scene.n_tendons
     rows = {
         name: np.shape(x)[0]
@@ -131,7 +132,6 @@ def simulate_batch(
     sharding = row_sharding(n_devices)
     if sharding is not None:
         batched = jax.device_put(batched, sharding)
-    dt0 = check_dt0(dt0, t0, t1, dtype)
     schedule = u if callable(u) else None
     traj = _simulate_rows(scene, damping, schedule, batched, span, ts, dt0, opts, group)
     return jtu.tree_map(lambda x: x[:b], traj)

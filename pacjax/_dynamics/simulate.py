@@ -191,6 +191,7 @@ def simulate(
     check_scene(scene)
     dtype = solver_dtype(scene)
     t0, t1 = check_span(t_span)
+    dt0 = check_dt0(dt0, t0, t1, dtype)
     controls = check_simulation_controls(scene, controls, t0, dtype)
     q0 = check_q(scene, q0, dtype)
     qdot0 = check_qdot(scene, qdot0, dtype)
@@ -198,7 +199,6 @@ def simulate(
         scene, t0, t1, saveat, damping, solver, rtol, atol, max_steps, dense, phi_inertia, adjoint
     )
     q0 = aligned_rest_start(scene, controls, q0, qdot0, span[0])
-    dt0 = check_dt0(dt0, t0, t1, dtype)
     return integrate(scene, damping, controls, q0, qdot0, span, ts, dt0, opts)
 
 
