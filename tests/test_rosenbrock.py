@@ -147,6 +147,47 @@ def test_held_jacobian_serves_several_steps():
         Rosenbrock23(jacobian="finite")
 
 
+def test_after_a_jump_the_step_starts_from_the_vector_field_there():
+    """A solver state carried from another point (here the end of another solve) with
+    ``made_jump=True``, as after a jump in the vector field: the step evaluates the vector field
+    at its start again rather than take the carried one, with the Jacobian made every step or
+    held, and equals a step from a fresh state."""
+    term = diffrax.ODETerm(_forced_linear)
+    y0 = jnp.array([1.0, 1.0])
+    for solver in (Rosenbrock23(), Rosenbrock23(jacobian="differences", reuse=5)):
+
+        def one_step(solver=solver, **state):
+            sol = diffrax.diffeqsolve(
+                term,
+                solver,
+                0.0,
+                0.05,
+                0.05,
+                y0,
+                stepsize_controller=diffrax.ConstantStepSize(),
+                saveat=diffrax.SaveAt(t1=True, solver_state=True),
+                **state,
+            )
+            return sol
+
+        elsewhere = diffrax.diffeqsolve(
+            term,
+            solver,
+            0.0,
+            0.3,
+            0.1,
+            3.0 * y0,
+            stepsize_controller=diffrax.ConstantStepSize(),
+            saveat=diffrax.SaveAt(t1=True, solver_state=True),
+        ).solver_state
+        fresh = one_step().ys[-1]
+        np.testing.assert_allclose(
+            one_step(solver_state=elsewhere, made_jump=True).ys[-1], fresh, rtol=1e-12
+        )
+        carried = one_step(solver_state=elsewhere, made_jump=False).ys[-1]
+        assert float(jnp.max(jnp.abs(carried - fresh))) > 1e-3  # the carried one is stale
+
+
 def test_secant_correction_maps_the_step_and_keeps_the_rest():
     rng = np.random.default_rng(0)
     jac, dy, df = rng.normal(size=(4, 4)), rng.normal(size=4), rng.normal(size=4)
@@ -205,7 +246,7 @@ def test_gradient_through_adaptive_steps_matches_finite_differences():
 def test_forward_differences_are_the_vector_fields_jacobian():
     """The held exact Jacobian by forward differences equals ``jax.jacfwd`` of the vector
     field, in motion with the tendons taut, to the differences' truncation (a few 1e-5 of the
-    largest entries, the tendon springs')."""
+    largest entries, the tendon springs'), with the vector field at the point given or not."""
     scene = as_traced_leaves(SCENE, jnp.float64)
     model = EquationsOfMotion.build(scene, pj.Damping.modal(SCENE), 1e-6, jnp.float64)
     n = scene.n_dofs
@@ -220,6 +261,9 @@ def test_forward_differences_are_the_vector_fields_jacobian():
     exact = jax.jit(jax.jacfwd(f))(x0)
     scale = float(jnp.abs(exact).max())
     np.testing.assert_allclose(differences, exact, rtol=1e-4, atol=1e-6 * scale)
+    # Where the vector field at x is not given, the loop evaluates it as its first point.
+    own = jax.jit(lambda x: forward_differences(f, x))(x0)
+    np.testing.assert_allclose(own, differences, rtol=1e-12, atol=1e-12 * scale)
 
 
 def test_plane_angle_weights_follow_the_bends():

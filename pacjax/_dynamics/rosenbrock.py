@@ -33,7 +33,10 @@ only after ``reuse`` accepted steps with the last one (or after a jump), and is 
 solver state meanwhile. On one trajectory that makes an exact Jacobian (dear: one vector field
 per state coordinate) affordable; in a ``vmap``-ped batch the choice between making it and
 holding it becomes a select, so every step makes it, and a batch wants ``reuse=1`` with a
-cheap ``J``.
+cheap ``J``. With reuse the first step also evaluates ``F0`` itself, in the loop that evaluates
+its stages (the compiled program then holds two copies of the vector field, the stages' and the
+differences', not three: XLA compiles each copy anew); in a batch that choice is a select too,
+one more vector field a step.
 
 A held ``J`` ages as the state moves, and the error estimate feels it: with ``J`` not the
 Jacobian the estimate's leading term is of second order, ``(J - df/dy)`` applied along the
@@ -113,18 +116,24 @@ class Rosenbrock23(diffrax.AbstractAdaptiveSolver):
 
     def init(self, terms, t0, t1, y0, args):
         # First same as last: the solver state is the vector field at the current state, and
-        # with reuse the Jacobian held and the accepted steps it has served (``reuse`` now: the
-        # first step makes one).
-        f0 = terms.vf(t0, y0, args)
+        # with reuse the Jacobian held, the accepted steps it has served (``reuse`` now: the
+        # first step makes one) and whether that vector field is known yet. With reuse it is
+        # not: the first step evaluates it in its loop of stages (see ``step``), where a copy
+        # here would be one more copy of the vector field for XLA to compile.
         if self.reuse == 1:
-            return f0
+            return terms.vf(t0, y0, args)
         x0, _ = ravel_pytree(y0)
-        return f0, jnp.zeros((x0.size, x0.size), x0.dtype), jnp.asarray(self.reuse, jnp.int32)
+        shape = jax.eval_shape(terms.vf, t0, y0, args)
+        f0 = jax.tree.map(lambda leaf: jnp.zeros(leaf.shape, leaf.dtype), shape)
+        held = jnp.zeros((x0.size, x0.size), x0.dtype)
+        return f0, held, jnp.asarray(self.reuse, jnp.int32), jnp.asarray(False)
 
     def func(self, terms, t0, y0, args):
         return terms.vf(t0, y0, args)
 
     def _jacobian(self, t, y, args, f, f0):
+        """The Jacobian at ``(t, y)``; ``f0`` the vector field there, or None where it is not
+        known yet (differences then evaluate it too)."""
         x, _ = ravel_pytree(y)
         if self.jacobian is None:
             return jax.jacfwd(lambda z: f(t, z))(x)
@@ -133,25 +142,27 @@ class Rosenbrock23(diffrax.AbstractAdaptiveSolver):
         return self.jacobian(t, y, args)
 
     def step(self, terms, t0, t1, y0, args, solver_state, made_jump):
-        if self.reuse == 1:
-            f0_tree, held, age = solver_state, None, None
-        else:
-            f0_tree, held, age = solver_state
-        if made_jump is not False:  # resolved when traced: no second copy of the vector field
-            f0_tree = jax.lax.cond(made_jump, lambda: terms.vf(t0, y0, args), lambda: f0_tree)
         x0, unravel = ravel_pytree(y0)
 
         def f(t, x):
             return ravel_pytree(terms.vf(t, unravel(x), args))[0]
 
-        f0 = ravel_pytree(f0_tree)[0]
         h = t1 - t0
-        if held is None:
-            jac = self._jacobian(t0, y0, args, f, f0)
+        if self.reuse == 1:
+            f0_tree, held, age, known = solver_state, None, None, True
+            if made_jump is not False:  # resolved when traced: no second copy of the vector field
+                f0_tree = jax.lax.cond(made_jump, lambda: terms.vf(t0, y0, args), lambda: f0_tree)
+            jac = self._jacobian(t0, y0, args, f, ravel_pytree(f0_tree)[0])
         else:
+            # The vector field at the start is evaluated in the loop of stages below where it
+            # is not known (the first step, after a jump), so that the program holds no copy of
+            # it outside the step; the differences evaluate it for themselves.
+            f0_tree, held, age, known = solver_state
+            known = known & ~jnp.asarray(made_jump)
             fresh = (age >= self.reuse) | jnp.asarray(made_jump)
-            jac = jax.lax.cond(fresh, lambda: self._jacobian(t0, y0, args, f, f0), lambda: held)
+            jac = jax.lax.cond(fresh, lambda: self._jacobian(t0, y0, args, f, None), lambda: held)
             age = jnp.where(fresh, 0, age) + 1
+        f0_known = ravel_pytree(f0_tree)[0]
         # Neither W nor T carry gradients: the step's derivative is that of the method with W
         # held fixed, a W-method's own (diffrax's implicit solvers stop them the same way).
         jac = jax.lax.stop_gradient(jac)
@@ -166,21 +177,37 @@ class Rosenbrock23(diffrax.AbstractAdaptiveSolver):
             return jax.scipy.linalg.lu_solve(lu, b)
 
         hdt = (h * _D) * rate
-        k1 = solve(f0 + hdt)
 
-        def stage(carry, second):
-            # The two new vector fields as one loop of two, so that the compiled program holds
-            # one copy of the vector field for them, not two: XLA compiles each copy anew.
-            k2, f1 = carry
-            x = x0 + jnp.where(second, h * k2, (0.5 * h) * k1)
-            fx = f(t0 + jnp.where(second, 1.0, 0.5) * h, x)
-            rhs = jnp.where(second, fx - _E32 * (k2 - f1) - 2.0 * (k1 - f0) + hdt, fx - k1)
+        def stage(carry, i):
+            # The vector fields of a step as one loop (the start's where it is not known, then
+            # the two new ones), so that the compiled program holds one copy of the vector
+            # field for them: XLA compiles each copy anew.
+            f0, k1, k2, f1 = carry
+            x = x0 + jnp.select([i == 1, i == 2], [(0.5 * h) * k1, h * k2], jnp.zeros_like(x0))
+            t = t0 + jnp.select([i == 1, i == 2], [0.5 * h, h], 0.0 * h)
+            if known is True:
+                fx = f(t, x)
+            else:
+                fx = jax.lax.cond((i > 0) | ~known, lambda: f(t, x), lambda: f0_known)
+            f0 = jnp.where(i == 0, fx, f0)
+            rhs = jnp.select(
+                [i == 0, i == 1],
+                [f0 + hdt, fx - k1],
+                fx - _E32 * (k2 - f1) - 2.0 * (k1 - f0) + hdt,
+            )
             k = solve(rhs)
-            return (jnp.where(second, k2, k + k1), jnp.where(second, f1, fx)), (k, fx)
+            k1 = jnp.where(i == 0, k, k1)
+            k2 = jnp.where(i == 1, k + k1, k2)
+            f1 = jnp.where(i == 1, fx, f1)
+            return (f0, k1, k2, f1), (k, fx)
 
         zero = jnp.zeros_like(x0)
-        (k2, _), (ks, fs) = jax.lax.scan(stage, (zero, zero), jnp.array([False, True]))
-        k3, f2 = ks[1], fs[1]
+        if known is True:  # first same as last: the start's vector field is the state's
+            first = (f0_known, solve(f0_known + hdt), zero, zero)
+            (f0, k1, k2, _), (ks, fs) = jax.lax.scan(stage, first, jnp.arange(1, 3))
+        else:
+            (f0, k1, k2, _), (ks, fs) = jax.lax.scan(stage, (zero,) * 4, jnp.arange(3))
+        k3, f2 = ks[-1], fs[-1]
         x1 = x0 + h * k2
         f2_tree = unravel(f2)
         error = unravel((h / 6.0) * (k1 - 2.0 * k2 + k3))
@@ -189,9 +216,11 @@ class Rosenbrock23(diffrax.AbstractAdaptiveSolver):
             error = jax.tree.map(jnp.multiply, error, weight)
         y1 = unravel(x1)
         dense_info = dict(y0=y0, y1=y1, k0=unravel(h * f0), k1=unravel(h * f2))
-        if held is not None and self.secant:
+        if held is None:
+            return y1, error, dense_info, f2_tree, diffrax.RESULTS.successful
+        if self.secant:
             jac = secant_update(jac, x1 - x0, f2 - f0)
-        state = f2_tree if held is None else (f2_tree, jac, age)
+        state = (f2_tree, jac, age, jnp.asarray(True))
         return y1, error, dense_info, state, diffrax.RESULTS.successful
 
 
@@ -203,16 +232,22 @@ def secant_update(jac, dy, df):
     return jac + jnp.outer(df - jac @ dy, dy / jnp.where(norm > 0, norm, 1.0))
 
 
-def forward_differences(f: Callable, x: jax.Array, fx: jax.Array) -> jax.Array:
-    """The Jacobian of ``f`` at ``x`` (where it is ``fx``) by forward differences, one coordinate
-    at a time (a ``lax.map``: the program holds one more copy of ``f``, where ``jax.jacfwd``
-    traces its forward derivative, a larger program that compiles for longer).
+def forward_differences(f: Callable, x: jax.Array, fx: jax.Array | None = None) -> jax.Array:
+    """The Jacobian of ``f`` at ``x`` (where it is ``fx``; None: evaluated here too, in the same
+    loop) by forward differences, one coordinate at a time (a ``lax.map``: the program holds
+    one more copy of ``f``, where ``jax.jacfwd`` traces its forward derivative, a larger program
+    that compiles for longer).
 
     Each coordinate's step is the square root of the machine epsilon times its size (at
     least one), so the truncation is about that relative to the Jacobian's entries; a W-method
     does not feel it.
     """
     steps = jnp.sqrt(jnp.finfo(x.dtype).eps) * jnp.maximum(jnp.abs(x), 1.0)
+    if fx is None:
+        # Row 0 the unmoved point: f(x) from the loop's own copy of f.
+        moved = jnp.concatenate([jnp.zeros((1, x.size), x.dtype), jnp.diag(steps)])
+        values = jax.lax.map(lambda dx: f(x + dx), moved)
+        return ((values[1:] - values[0]) / steps[:, None]).T
 
     def column(j):
         return (f(x.at[j].add(steps[j])) - fx) / steps[j]
