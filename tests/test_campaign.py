@@ -184,3 +184,36 @@ def test_batch_and_single_are_compared_at_the_equilibrium_their_tolerance_leaves
     stalled = ended(pj.RESULTS.stalled, shifted)
     with pytest.raises(PropertyFailure, match="but single"):
         ran_out_of_steps_on_the_way(scene, controls, eq, stalled, "float64")
+
+
+def test_two_stable_equilibria_of_one_scene_are_told_apart_from_a_broken_batch():
+    """A column past its buckling load, planar (PCC in the paper's frame), has two mirror-image
+    bent minima: a batch row and its single solve that reach one each (a start near the
+    boundary between the basins, rounding deciding) pass as ``"another equilibrium"`` where
+    both succeeded, and fail where that was not asked; a point that is not an equilibrium of
+    the scene still fails."""
+    import jax.numpy as jnp
+
+    import pacjax as pj
+
+    stiffness, length = 0.05, 0.4
+    critical = 3 * stiffness / length**2
+    column = pj.Scene(
+        pj.Robot([pj.Segment(length, stiffness, axial_stiffness=1e6)]),
+        pj.PCC(frame="paper"),
+        loads=(pj.Gravity(), pj.PointMass(1.25 * critical / 9.81, 0, 1.0)),
+    )
+    controls = jnp.zeros(0)
+    left, right = (
+        pj.solve_equilibrium(column, controls, q0=np.array([bend, 0.0, 0.0]))
+        for bend in (-0.3, 0.3)
+    )
+    assert bool(left.successful) and bool(right.successful)
+    assert float(left.q[0]) < -1.0 < 1.0 < float(right.q[0])  # bent to either side
+    both = require_same_tip(column, controls, left.q, right.q, "float64", both_stable=True)
+    assert both == "another equilibrium"
+    with pytest.raises(PropertyFailure, match="after a Newton step"):
+        require_same_tip(column, controls, left.q, right.q, "float64")
+    with pytest.raises(PropertyFailure, match="after a Newton step"):
+        halfway = right.q.at[0].multiply(0.8)  # not an equilibrium: its Newton step moves it
+        require_same_tip(column, controls, left.q, halfway, "float64", both_stable=True)
