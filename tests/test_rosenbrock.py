@@ -2,6 +2,7 @@
 stiff part it is given by default (``EquationsOfMotion.stiff_jacobian``)."""
 
 import diffrax
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -154,38 +155,33 @@ def test_after_a_jump_the_step_starts_from_the_vector_field_there():
     held, and equals a step from a fresh state."""
     term = diffrax.ODETerm(_forced_linear)
     y0 = jnp.array([1.0, 1.0])
-    for solver in (Rosenbrock23(), Rosenbrock23(jacobian="differences", reuse=5)):
 
-        def one_step(solver=solver, **state):
-            sol = diffrax.diffeqsolve(
-                term,
-                solver,
-                0.0,
-                0.05,
-                0.05,
-                y0,
-                stepsize_controller=diffrax.ConstantStepSize(),
-                saveat=diffrax.SaveAt(t1=True, solver_state=True),
-                **state,
-            )
-            return sol
-
-        elsewhere = diffrax.diffeqsolve(
+    @eqx.filter_jit  # one program per solver (one step): the span, state and jump are traced
+    def solve(solver, y, t1, state, made_jump):
+        return diffrax.diffeqsolve(
             term,
             solver,
             0.0,
-            0.3,
-            0.1,
-            3.0 * y0,
+            t1,
+            t1,
+            y,
             stepsize_controller=diffrax.ConstantStepSize(),
             saveat=diffrax.SaveAt(t1=True, solver_state=True),
-        ).solver_state
-        fresh = one_step().ys[-1]
-        np.testing.assert_allclose(
-            one_step(solver_state=elsewhere, made_jump=True).ys[-1], fresh, rtol=1e-12
+            solver_state=state,
+            made_jump=made_jump,
         )
-        carried = one_step(solver_state=elsewhere, made_jump=False).ys[-1]
-        assert float(jnp.max(jnp.abs(carried - fresh))) > 1e-3  # the carried one is stale
+
+    for solver in (Rosenbrock23(), Rosenbrock23(jacobian="differences", reuse=5)):
+
+        def end(state, made_jump, solver=solver):
+            return solve(solver, y0, 0.15, state, jnp.asarray(made_jump)).ys[-1]
+
+        start = solver.init(term, 0.0, 0.15, y0, None)
+        fresh = end(start, False)
+        elsewhere = solve(solver, 3.0 * y0, 0.3, solver.init(term, 0.0, 0.3, 3.0 * y0, None), False)
+        np.testing.assert_allclose(end(elsewhere.solver_state, True), fresh, rtol=1e-12)
+        stale = end(elsewhere.solver_state, False)
+        assert float(jnp.max(jnp.abs(stale - fresh))) > 1e-3  # the carried one is stale
 
 
 def test_secant_correction_maps_the_step_and_keeps_the_rest():
