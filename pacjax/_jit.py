@@ -4,8 +4,9 @@ that shorten compilation.
 On XLA:CPU (jaxlib 0.10) most of the compile time of the solver's round goes to the MLIR
 fusion emitters. The classic elemental emitters compile the same HLO in about half the time
 with the same run time for the statics programs (``benchmarks/RESULTS.md``, "Bending-vector
-steps, 100x dt growth, classic XLA:CPU emitters"). The dynamics keep the default emitters: its
-long integrations ran slower with the classic ones.
+steps, 100x dt growth, classic XLA:CPU emitters"). The dynamics' integration keeps the default
+emitters: its long integrations ran slower with the classic ones; the programs a simulation runs
+once before it (the start's plane alignment, the default damping's lowest mode) take them.
 
 ``PACJAX_FAST_COMPILE=1`` adds LLVM's optimisation level 0 (``xla_backend_optimization_level``)
 to them: the statics programs then compile in roughly two thirds of the time and run slower

@@ -7,6 +7,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from .._config import MATMUL_PRECISION
+from .._jit import jit
 from .._model.inertia import mass_matrix
 from .._model.inputs import solver_dtype
 from .._model.scene import Scene
@@ -86,7 +87,7 @@ class Damping(eqx.Module):
         return self.stiffness.astype(dtype) * jnp.stack(gains).astype(dtype)
 
 
-@eqx.filter_jit
+@jit  # run once per scene: the statics' compile options (pacjax._jit)
 def _rest_eigenvalues(scene: Scene, dtype):
     q = scene.zeros(dtype)
     stiffness = jax.hessian(scene.elastic_energy)(q)

@@ -29,6 +29,7 @@ from jaxtyping import Array, Bool, Float, Int
 
 from .. import _deprecated
 from .._chord import kvaerno5
+from .._jit import jit
 from .._model.inertia import PHI_INERTIA_FACTOR
 from .._model.inputs import (
     as_traced_leaves,
@@ -308,7 +309,7 @@ def _check_damping(scene: Scene, damping, dtype) -> Damping:
     return jax.tree.map(lambda x: x.astype(dtype) if eqx.is_inexact_array(x) else x, damping)
 
 
-@eqx.filter_jit
+@jit  # run once per simulation: the statics' compile options (pacjax._jit)
 def aligned_rest_start(scene: Scene, controls, q0, qdot0, t0):
     """``q0`` with the bending plane of each straight PCC/PAC segment at rest turned to the
     force on it at ``t0`` (:meth:`pacjax._statics.problem.ScaledProblem.aligned`).
