@@ -423,6 +423,13 @@ def default_solver(rtol: float, batch: bool = False) -> diffrax.AbstractSolver:
     return rosenbrock23("stiff" if batch else "exact")
 
 
+#: The vector field as the integration traces it: diffrax and the solvers call it several
+#: times while tracing one program (the first step's size, the state's shape, the stages, the
+#: Jacobian's differences), and a ``jit`` traces the Python once for all calls alike; XLA
+#: inlines it, so the compiled program is the same.
+_TRACED_VECTOR_FIELD = eqx.filter_jit(vector_field)
+
+
 @eqx.filter_jit
 def integrate(scene, damping, controls, q0, qdot0, span, ts, dt0, opts: _Options):
     """The compiled simulation of checked inputs (:func:`prepare`, :func:`aligned_rest_start`):
@@ -433,7 +440,7 @@ def integrate(scene, damping, controls, q0, qdot0, span, ts, dt0, opts: _Options
         # Constant controls: the vector field does not depend on time (no T term to trace).
         solver = dataclasses.replace(solver, autonomous=True)
     sol = diffrax.diffeqsolve(
-        diffrax.ODETerm(vector_field),
+        diffrax.ODETerm(_TRACED_VECTOR_FIELD),
         solver,
         t0=span[0],
         t1=span[1],
