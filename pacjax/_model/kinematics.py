@@ -15,8 +15,8 @@ Two evaluation paths share these rules:
   chained by a short scan; the position is the cumulative sum of a 4-point Gauss-Legendre rule
   per interval (error ~1e-9 relative even at 2 pi of bending per segment). Each point costs about
   four exponentials whatever its ``s``, and points shared by several tendons are evaluated once.
-- **Traced points** (``s`` only known at run time): the frame at ``s`` is integrated from the
-  segment's base with a Gauss-Legendre rule of ``quadrature_points`` nodes over ``[0, s]``.
+- **Traced points** (``s`` only known at run time): ``[0, s]`` is cut in the same number of even
+  intervals and integrated by the same rules, from the segment's base.
 
 Segments are chained by a scan over their end frames.
 """
@@ -48,10 +48,9 @@ _KNOT_MERGE = 1e-12
 class KinematicsConfig:
     """Static settings of the kinematics (part of a scene's structure)."""
 
-    __slots__ = ("quadrature_points", "rotation_substeps")
+    __slots__ = ("rotation_substeps",)
 
-    def __init__(self, quadrature_points: int, rotation_substeps: int):
-        self.quadrature_points = quadrature_points
+    def __init__(self, rotation_substeps: int):
         self.rotation_substeps = rotation_substeps
 
     @property
@@ -91,20 +90,16 @@ def local_frame(
     s: Float[Array, ""],
     config: KinematicsConfig,
 ) -> tuple[Float[Array, "3 3"], Float[Array, "3"]]:
-    """Rotation and position (m) of the frame at ``s`` in the segment's base frame."""
-    nodes, weights = gauss_legendre(config.quadrature_points)
-    # The frame at s and at the quadrature nodes of [0, s] in one vmapped evaluation, so the
-    # rotation is traced once (compile time scales with the size of the traced graph).
-    where = jnp.concatenate([s * jnp.asarray(nodes, q.dtype), s[None]])
-    closed = model.plane_frames(q, where)
-    if closed is not None:
-        rots = closed[0]
-    else:
-        rots = jax.vmap(lambda v: local_rotation(model, q, v, config.rotation_substeps))(where)
-    tangents = rots[:-1, :, 2]
-    w = jnp.asarray(weights, q.dtype)
-    position = (length + model.elongation(q)) * s * jnp.sum(w[:, None] * tangents, axis=0)
-    return rots[-1], position
+    """Rotation and position (m) of the frame at ``s`` in the segment's base frame.
+
+    ``[0, s]`` is cut in ``config.min_intervals`` even intervals and integrated as the knot path
+    integrates a segment (:func:`segment_knot_frames`), so a traced site is as accurate as a
+    known one wherever it lies. One Gauss-Legendre rule over ``[0, s]`` put a site of a segment
+    curled by 9.5 rad 0.14 m from its knot-path position.
+    """
+    knots = s * jnp.linspace(0.0, 1.0, config.min_intervals + 1, dtype=q.dtype)
+    rots, positions, _ = segment_knot_frames(model, q, length, knots)
+    return rots[-1], positions[-1]
 
 
 def grid_frames(

@@ -76,8 +76,9 @@ class Scene(eqx.Module):
             :class:`PointMoment`.
         markers: default marker sites ``((segment, s), ...)`` or with a local offset, used by
             :func:`pacjax.markers`, plots and identification.
-        quadrature_points: Gauss-Legendre points per segment for positions, the elastic energy
-            and the distributed weight.
+        quadrature_points: Gauss-Legendre points per segment for the elastic and kinetic
+            energies and the lengths of continuous tendon channels (positions and the weight
+            are integrated on the kinematics' knots, :mod:`pacjax._model.kinematics`).
         rotation_substeps: Magnus sub-steps per segment (default: exact for the model).
     """
 
@@ -170,7 +171,7 @@ class Scene(eqx.Module):
     @property
     def kinematics(self) -> KinematicsConfig:
         substeps = self.rotation_substeps or self.model.exact_rotation_substeps()
-        return KinematicsConfig(self.quadrature_points, substeps)
+        return KinematicsConfig(substeps)
 
     def coordinates(self, q: Float[Array, " n_dofs"]) -> Float[Array, "n d"]:
         """Flat coordinates as a (segments, :attr:`dofs_per_segment`) matrix, pinned ones 0."""
