@@ -40,6 +40,14 @@ _NEWTON_NEAR = 1e-2
 # a tighter cap leaves the next steps short of Newton along the softest mode (the bending
 # planes), which then creeps. A step that overshoots is still cut by the search on the merit.
 _DT_GROWTH = (2.0, 100.0)
+# Steps after an escape in which a non-conservative solve takes the flow step, not the plain
+# Newton step: Newton's converges to the nearest stationary point, the saddle just left (a
+# straight PAC segment's plane angle at the maximum of its regulariser, reported unstable where
+# the batch row reached the stable twin). The flow step, its dt capped by the negative
+# curvature, doubles the distance from the saddle each step: 0.05 to pi in six. Bounded,
+# because a point with an indefinite symmetric stiffness can be an attractor of the flow (a
+# dead moment bending a twistable rod past ~2 rad), which Newton's steps then reach again.
+_LEAVING_STEPS = 16
 
 
 class PTCState(eqx.Module):
@@ -53,6 +61,9 @@ class PTCState(eqx.Module):
     # Set by an escape, cleared once the stiffness is no longer indefinite: until then a small
     # residual is not convergence (see ``terminate``).
     escaping: Bool[Array, ""]
+    # Steps left after an escape (0 once the stiffness is no longer indefinite) in which a
+    # non-conservative solve takes no plain Newton step (see ``_LEAVING_STEPS``).
+    leaving: Int[Array, ""]
     eig: Float[Array, ""]
     eigvals: Float[Array, " n"]
     eigvecs: Float[Array, "n n"]
@@ -150,6 +161,7 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
             step=jnp.asarray(0),
             escapes=jnp.asarray(0),
             escaping=jnp.asarray(False),
+            leaving=jnp.asarray(0),
             eig=jnp.asarray(0.0, dtype),
             eigvals=jnp.ones(n, dtype),
             eigvecs=jnp.eye(n, dtype=dtype),
@@ -252,7 +264,7 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
         r_newton, _ = fn(_moved(args, y, full), args)
         took_newton = near & jnp.all(jnp.isfinite(full)) & jnp.all(jnp.isfinite(r_newton))
         took_newton = took_newton & (max_abs(r_newton) <= 0.5 * max_abs(state.residual))
-        took_newton = took_newton & ~first & ~escape
+        took_newton = took_newton & ~first & ~escape & (state.leaving == 0)
         return jnp.where(took_newton, full, flow), took_newton
 
     def _search(self, fn, y, args, state: PTCState, delta, took_newton, first, escape):
@@ -396,6 +408,11 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
             # symmetric stiffness is indefinite. There the flag lasts one step (no termination
             # on the escaped iterate itself); it used to hold such a row to the step limit.
             escaping=(escape | (state.escaping & self.symmetric)) & (eig < -self.stability_tol),
+            leaving=jnp.where(
+                eig < -self.stability_tol,
+                jnp.where(escape, _LEAVING_STEPS, jnp.maximum(state.leaving - 1, 0)),
+                0,
+            ),
             eig=eig,
             eigvals=eigvals,
             eigvecs=eigvecs,
