@@ -94,8 +94,8 @@ def local_frame(
 
     ``[0, s]`` is cut in ``config.min_intervals`` even intervals and integrated as the knot path
     integrates a segment (:func:`segment_knot_frames`), so a traced site is as accurate as a
-    known one wherever it lies. One Gauss-Legendre rule over ``[0, s]`` put a site of a segment
-    curled by 9.5 rad 0.14 m from its knot-path position.
+    known one wherever it lies: one Gauss-Legendre rule over ``[0, s]`` is not (on a segment
+    curled by 9.5 rad an 8-point rule misplaces a site by 0.14 m).
     """
     knots = s * jnp.linspace(0.0, 1.0, config.min_intervals + 1, dtype=q.dtype)
     rots, positions, _ = segment_knot_frames(model, q, length, knots)

@@ -41,12 +41,12 @@ _NEWTON_NEAR = 1e-2
 # planes), which then creeps. A step that overshoots is still cut by the search on the merit.
 _DT_GROWTH = (2.0, 100.0)
 # Steps after an escape in which a non-conservative solve takes the flow step, not the plain
-# Newton step: Newton's converges to the nearest stationary point, the saddle just left (a
-# straight PAC segment's plane angle at the maximum of its regulariser, reported unstable where
-# the batch row reached the stable twin). The flow step, its dt capped by the negative
-# curvature, doubles the distance from the saddle each step: 0.05 to pi in six. Bounded,
-# because a point with an indefinite symmetric stiffness can be an attractor of the flow (a
-# dead moment bending a twistable rod past ~2 rad), which Newton's steps then reach again.
+# Newton step: Newton's converges to the nearest stationary point, the saddle just left (such
+# as a straight PAC segment's plane angle at the maximum of its regulariser). The flow step,
+# its dt capped by the negative curvature, doubles the distance from the saddle each step:
+# 0.05 to pi in six. Bounded, because a point with an indefinite symmetric stiffness can be an
+# attractor of the flow (a dead moment bending a twistable rod past ~2 rad), which Newton's
+# steps then reach again.
 _LEAVING_STEPS = 16
 
 
