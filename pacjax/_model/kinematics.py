@@ -66,23 +66,6 @@ def _magnus_step(model: StrainModel, q, a, h):
     return 0.5 * h * (u1 + u2) + _MAGNUS_COMMUTATOR * h * h * jnp.stack(c)
 
 
-def _magnus_steps(model: StrainModel, q, s, substeps: int) -> list:
-    """Fourth-order Magnus rotation vectors of the sub-steps of ``[0, s]``."""
-    h = s / substeps
-    return [_magnus_step(model, q, k * h, h) for k in range(substeps)]
-
-
-def local_rotation(
-    model: StrainModel, q: Float[Array, " d"], s: Float[Array, ""], substeps: int
-) -> Float[Array, "3 3"]:
-    """Rotation of the frame at ``s`` relative to the segment's base frame."""
-    base = model.base_rotation(q)
-    rot = jnp.eye(3, dtype=q.dtype) if base is None else base
-    for omega in _magnus_steps(model, q, s, substeps):
-        rot = matmul3(rot, exp_so3(omega))
-    return rot
-
-
 def local_frame(
     model: StrainModel,
     q: Float[Array, " d"],
