@@ -10,6 +10,7 @@ from .._config import MATMUL_PRECISION
 from .._jit import jit
 from .._model.inertia import mass_matrix
 from .._model.inputs import solver_dtype
+from .._model.query import astype
 from .._model.scene import Scene
 from .._model.values import as_float, check_positive, concrete
 
@@ -69,14 +70,7 @@ class Damping(eqx.Module):
         omega = jnp.sqrt(jnp.min(_rest_eigenvalues(scene, dtype)))
         value = concrete(omega)
         if value is not None and not (np.isfinite(value) and value > 0):
-            # A segment so light that M is singular in this precision (a density of 1e-308
-            # kg/m passes the > 0 check): say so, not "Damping.stiffness must be finite".
-            lightest = min(float(seg.linear_density) for seg in scene.robot.segments)
-            raise ValueError(
-                "the mass matrix of the robot is singular in this precision (lowest mode "
-                f"{value}): a segment's linear_density ({lightest:g} kg/m) is too small to "
-                "simulate dynamics"
-            )
+            _raise_singular(scene, dtype, value)
         return cls(stiffness=2.0 * ratio / omega, **kwargs)
 
     def tendon_gains(self, scene: Scene, dtype) -> Float[Array, " m"]:
@@ -85,6 +79,30 @@ class Damping(eqx.Module):
             return jnp.broadcast_to(self.tendon.astype(dtype), (scene.n_tendons,))
         gains = [t.gain if t.mode == "length" else jnp.zeros(()) for t in scene.tendons]
         return self.stiffness.astype(dtype) * jnp.stack(gains).astype(dtype)
+
+
+def _raise_singular(scene: Scene, dtype, value) -> None:
+    """Say why the lowest mode at rest is not a positive number (``M`` singular), not
+    "Damping.stiffness must be finite": the precision where float64 resolves it (the mass
+    matrix of three 0.1 m ``PolynomialCurvature(3)`` segments is conditioned at 2e11, past
+    float32's rounding), else the lightest segment (a density of 1e-308 kg/m passes the
+    > 0 check)."""
+    if jnp.dtype(dtype) != jnp.float64:
+        wide = concrete(
+            jnp.sqrt(jnp.min(_rest_eigenvalues(astype(scene, jnp.float64), jnp.float64)))
+        )
+        if wide is not None and np.isfinite(wide) and wide > 0:
+            raise ValueError(
+                f"the mass matrix of the robot is singular in {jnp.dtype(dtype).name} (lowest "
+                f"mode {value}; {wide:.4g} rad/s in float64): simulate this scene in float64, "
+                "pj.astype(scene, jnp.float64)"
+            )
+    lightest = min(float(seg.linear_density) for seg in scene.robot.segments)
+    raise ValueError(
+        "the mass matrix of the robot is singular in this precision (lowest mode "
+        f"{value}): a segment's linear_density ({lightest:g} kg/m) is too small to "
+        "simulate dynamics"
+    )
 
 
 @jit  # run once per scene: the statics' compile options (pacjax._jit)
