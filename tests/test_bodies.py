@@ -146,6 +146,7 @@ def _tapered_elastica(force):
     return np.array([x, z])
 
 
+@pytest.mark.slow  # a high-resolution reference (18 s): CI's slow step
 def test_tapered_cantilever_large_load_against_a_high_resolution_reference():
     force = 0.2  # the tip drops by 31 % of the length
     # The small-load test's scene structure (6 segments, 8 points): its solver is compiled once.
@@ -237,6 +238,7 @@ def _hanging_cable(kappa0, ei, w, length, sites):
     return np.asarray(out)
 
 
+@pytest.mark.slow  # 19 compilations (20 s): CI's slow step
 def test_pre_curved_hanging_cable_against_a_numpy_reference():
     length, n, ei, density, kappa0 = 0.5, 6, 2e-3, 0.08, 5.0
     piece = length / n
@@ -286,7 +288,7 @@ def _two_segments(extensible=True, rest=(None, None)):
     [
         (pj.PAC(), pj.PCC()),
         slow((pj.PolynomialCurvature(1), pj.PolynomialCurvature(0))),
-        (pj.PolynomialCurvature(1), pj.PCC()),
+        slow((pj.PolynomialCurvature(1), pj.PCC())),
     ],
     ids=["PAC+PCC", "Poly1+Poly0", "Poly1+PCC"],
 )

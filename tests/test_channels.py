@@ -74,7 +74,7 @@ def _chord_sum(scene, q, tendon, n):
 _lengths = eqx.filter_jit(lambda scene, q: scene.tendon_lengths(q))  # once per structure
 
 
-@pytest.mark.parametrize("model", MODELS, ids=lambda m: type(m).__name__)
+@pytest.mark.parametrize("model", [*MODELS[:2], slow(MODELS[2])], ids=lambda m: type(m).__name__)
 def test_length_is_the_arc_length_of_the_tendon_curve(model):
     scene = pj.Scene(_robot(), model, _tendons())
     for q in (scene.zeros(), _bent(scene), _bent(scene, 5.0, seed=1)):
@@ -142,7 +142,7 @@ def test_straight_channel_is_the_ring_model_at_rest_and_its_limit_in_a_bend():
 
 @pytest.mark.parametrize(
     "model, dtype",
-    [(pj.PAC(), jnp.float64), (pj.PAC(), jnp.float32)]
+    [slow(pj.PAC(), jnp.float64), (pj.PAC(), jnp.float32)]
     + [slow(m, jnp.float64) for m in MODELS if m != pj.PAC()],
     ids=lambda x: type(x).__name__ if isinstance(x, pj.StrainModel) else jnp.dtype(x).name,
 )
@@ -223,6 +223,7 @@ def test_channels_need_continuous_frames():
         pj.Scene(_robot(), pj.PAC(frame="paper"), (tendon,))
 
 
+@pytest.mark.slow  # the tentacle with 11 and 81 rings, 25 compilations (26 s): CI's slow step
 def test_sparse_rings_warn_once_and_enough_rings_do_not(monkeypatch):
     from pacjax._statics import ringcheck
 

@@ -202,6 +202,7 @@ def test_input_validation():
             pj.simulate(SCENE, (0.0, 1.0), dt0=dt0)
 
 
+@pytest.mark.slow  # a fresh Python process that compiles a simulation (17 s): CI's slow step
 def test_a_simulation_can_be_kept_in_the_compilation_cache():
     """JAX's persistent cache stores no program that calls back into Python. diffrax checks the
     save times with equinox's runtime errors, callbacks unless ``EQX_ON_ERROR=nan`` (which

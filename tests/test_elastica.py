@@ -169,7 +169,7 @@ def total_elongation(scene, q):
 
 
 # ------------------------------------------------------------------------------ linear limit
-@pytest.mark.parametrize("n_segments", [1, 2])
+@pytest.mark.parametrize("n_segments", [1, pytest.param(2, marks=pytest.mark.slow)])
 def test_small_tip_load_matches_linear_beam_theory(n_segments):
     alpha = 0.03  # nonlinearity: the elastica's deflection is 1.0e-4 relative below alpha / 3
     load = alpha * EI / LENGTH**2

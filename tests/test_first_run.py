@@ -48,6 +48,7 @@ def test_help_and_usage_errors_do_not_import_jax():
     assert not out["jax"]
 
 
+@pytest.mark.slow  # a fresh Python process that compiles a solve (27 s): CI's slow step
 def test_a_solver_first_used_inside_the_users_jit_runs():
     """pacjax loads its modules on first use, so the solver's module may first be imported
     while the user's ``jit`` traces: its compile options (top-level calls only) must still be
@@ -132,6 +133,7 @@ def _solve_with_cache(root) -> dict:
     return _python(SOLVE_WITH_CACHE, {"CACHE_ROOT": str(root)})
 
 
+@pytest.mark.slow  # three fresh Python processes, two of them compiling (30 s): CI's slow step
 def test_cache_is_written_read_back_and_survives_a_damaged_entry(tmp_path):
     first = _solve_with_cache(tmp_path)
     entries = sorted(p for p in os.listdir(first["directory"]) if "solve_and_sag" in p)

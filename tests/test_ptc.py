@@ -90,7 +90,8 @@ def test_follower_force_residual_is_the_same_under_jit():
     scene = pj.Scene(robot, pj.PolynomialCurvature(order=2), loads=(force,))
     scene = static_load_sites(scene)
     q = jnp.asarray(np.random.default_rng(0).normal(0.0, 1.0, scene.n_dofs))
-    eager = np.asarray(scene.residual(q, None))
+    # Closed over, the scene's site stays a Python float, as outside jit.
+    eager = np.asarray(jax.jit(lambda x: scene.residual(x, None))(q))
     jitted = np.asarray(eqx.filter_jit(lambda sc, x: sc.residual(x, None))(scene, q))
     np.testing.assert_allclose(jitted, eager, rtol=1e-13, atol=1e-13 * np.abs(eager).max())
 
@@ -169,6 +170,7 @@ def test_newton_start_takes_newtons_steps_where_they_descend_and_hands_over_wher
     np.testing.assert_allclose(y_hard, 3.0, atol=1e-10)
 
 
+@pytest.mark.slow  # 25 compilations (17 s): CI's slow step
 def test_tentacle_in_strain_coordinates_converges_in_newtons_steps():
     scene = pj.presets.tentacle(pj.PolynomialCurvature(1))
     tensions = np.random.default_rng(1).uniform(0.0, 8.0, (8, 2))

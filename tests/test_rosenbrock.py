@@ -43,7 +43,12 @@ def _end_error(jacobian, n_steps: int, reference) -> float:
 
 @pytest.mark.parametrize(
     "jacobian",
-    [None, "differences", lambda t, y, args: 0.8 * A, lambda t, y, args: jnp.diag(jnp.diag(A))],
+    [
+        None,
+        pytest.param("differences", marks=pytest.mark.slow),
+        pytest.param(lambda t, y, args: 0.8 * A, marks=pytest.mark.slow),
+        lambda t, y, args: jnp.diag(jnp.diag(A)),
+    ],
     ids=["exact", "differences", "scaled", "diagonal"],
 )
 def test_second_order_with_any_jacobian(jacobian):
@@ -83,6 +88,7 @@ def _van_der_pol_end(solver, mu=50.0, t1=100.0, rtol=1e-6):
     )
 
 
+@pytest.mark.slow  # two adaptive integrations of thousands of steps (13 s): CI's slow step
 def test_stiff_van_der_pol_matches_kvaerno5():
     """mu = 1000: L-stable steps through the fast transitions, dense output between them; the
     same steps with ``autonomous=True``."""

@@ -41,7 +41,7 @@ def _pull(segment, tendon, amount=0.01):
     return controls
 
 
-@pytest.mark.parametrize("model", [pj.PCC(), pj.PAC()], ids=["PCC", "PAC"])
+@pytest.mark.parametrize("model", [slow(pj.PCC()), pj.PAC()], ids=["PCC", "PAC"])
 @pytest.mark.parametrize("tendon", [0, 1, 2])
 def test_straight_segment_turns_to_its_pulled_tendon(model, tendon):
     scene = pj.presets.stella2023(model, tip_mass=0.2)
@@ -113,7 +113,8 @@ def test_models_without_a_free_plane_angle_start_where_asked(model):
     assert np.all(_aligned(scene, _pull(1, 2)) == 0.0)
 
 
-@pytest.mark.parametrize("model", [pj.PCC(), slow(pj.PAC())], ids=["PCC", "PAC"])
+@pytest.mark.slow  # 24 commands solved twice, each way compiled: 16 s for PCC
+@pytest.mark.parametrize("model", [pj.PCC(), pj.PAC()], ids=["PCC", "PAC"])
 def test_aligned_start_reaches_the_same_equilibria_in_fewer_steps(model):
     scene = pj.presets.stella2023(model, tip_mass=0.2)
     commands = random_commands(24, seed=3)
@@ -219,7 +220,8 @@ def _newton_models(problem, y):
     return jac, (problem.row / problem.sigma)[:, None] * along, jax.jacfwd(problem.residual)(y)
 
 
-@pytest.mark.parametrize("model", [pj.PCC(), slow(pj.PAC())], ids=["PCC", "PAC"])
+@pytest.mark.slow  # one large program (the energy's Hessian along the moves), 25 s
+@pytest.mark.parametrize("model", [pj.PCC(), pj.PAC()], ids=["PCC", "PAC"])
 def test_the_newton_model_is_the_energy_along_the_moves(model):
     # A conservative PCC/PAC scene's Jacobian is the Hessian of E(moved(y, dy)) at dy = 0, not
     # the polar one, except on a segment whose end angle is mostly cancelled (an S of PAC),
