@@ -27,7 +27,6 @@ def no_solver(monkeypatch):
     def spy(*args, **kwargs):
         raise AssertionError("the solver was reached: the options were not rejected beforehand")
 
-    monkeypatch.setattr(equilibrium_module, "_solve", spy)
     monkeypatch.setattr(equilibrium_module, "_solve_checked", spy)
     monkeypatch.setattr(batch_module, "_solve_chunk", spy)
     monkeypatch.setattr(batch_module, "pool_solve", spy)

@@ -171,7 +171,6 @@ def _solve_and_sag(scene: Scene, controls, q0, opts: SolverOptions):
     return eq, ring_chord_sag(scene, eq.q)
 
 
-_solve = jit(solve_core)
 _solve_checked = jit(_solve_and_sag)
 _solve_linearised = jit(solve_core_linearised)
 
@@ -243,8 +242,11 @@ def _retry(scene: Scene, controls, q0, eq: Equilibrium, opts: SolverOptions, fal
         return jtu.tree_map(lambda a: jnp.asarray(a)[None], x)
 
     def solve(rows, starts, options, conservative=False, scene=scene):
+        # The first solve's program where the scene and options are its own (a retry from
+        # another start): compiling a program without the sag cost as much again.
         sc = conservative_part(scene) if conservative else scene
-        return one_row(_solve(sc, controls, jnp.asarray(starts[0], q0.dtype), options))
+        eq, _ = _solve_checked(sc, controls, jnp.asarray(starts[0], q0.dtype), options)
+        return one_row(eq)
 
     starts = np.asarray(q0)[None]
     retried = retry_failed(scene, one_row(eq), starts, solve, opts, flow=fallback)
