@@ -1,6 +1,6 @@
 """The space of scenes a user can write, and the properties every solve on them must have.
 
-Shared by the fast profile in the default test step (``tests/test_campaign.py``) and the deep
+Shared by the fast profile in CI's slow test step (``tests/test_campaign.py``) and the deep
 campaign (``benchmarks/campaign.py``).
 
 A scene is a STRUCTURE (segments, strain models, extensibility, load kinds and sites, tendon

@@ -25,6 +25,7 @@ def test_help():
     assert "demo" in result.output and "solve" in result.output
 
 
+@pytest.mark.slow  # the whole demo, compiled (37 s): CI's slow step
 def test_demo_writes_figure_and_table(tmp_path):
     result = run("demo", "--out", tmp_path)
     assert result.exit_code == 0, result.output

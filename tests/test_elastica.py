@@ -183,7 +183,7 @@ def test_small_tip_load_matches_linear_beam_theory(n_segments):
     assert abs(deflection / linear - 1.0) < 1e-3
 
 
-@pytest.mark.parametrize("n_segments", [1, 2])
+@pytest.mark.parametrize("n_segments", [1, pytest.param(2, marks=pytest.mark.slow)])
 def test_small_self_weight_matches_linear_beam_theory(n_segments):
     beta = 0.03
     weight = beta * EI / LENGTH**3

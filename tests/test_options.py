@@ -70,6 +70,7 @@ def test_workflows_reject_bad_options_before_solving(no_solver):
         pj.identify(SCENE, data, options={"tol": 1e-8})
 
 
+@pytest.mark.slow  # five solves with options of their own, each compiled (37 s): CI's slow step
 def test_options_object_and_overrides_reach_the_solver():
     loose = pj.SolverOptions(tol=1e-4)
     one = pj.solve_equilibrium(SCENE, U, options=loose)

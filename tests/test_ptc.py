@@ -181,6 +181,7 @@ def test_tentacle_in_strain_coordinates_converges_in_newtons_steps():
     assert int(np.max(eq.steps)) <= 6, np.asarray(eq.steps)
 
 
+@pytest.mark.slow  # 7 compilations (26 s): CI's slow step
 def test_pac_tentacle_takes_newtons_steps_from_a_long_first_step():
     # PCC/PAC start the continuation at dt = 1e3 (pacjax._statics.options.POLAR_INITIAL_DT):
     # long enough for near-Newton steps along the bending, short enough to hold the plane
