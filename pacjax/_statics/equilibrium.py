@@ -242,8 +242,9 @@ def _retry(scene: Scene, controls, q0, eq: Equilibrium, opts: SolverOptions, fal
         return jtu.tree_map(lambda a: jnp.asarray(a)[None], x)
 
     def solve(rows, starts, options, conservative=False, scene=scene):
-        # The first solve's program where the scene and options are its own (a retry from
-        # another start): compiling a program without the sag cost as much again.
+        # The first attempt's program, sag check and all: a retry of the same scene and
+        # options from another start then compiles nothing (one without the check compiled as
+        # long as the first).
         sc = conservative_part(scene) if conservative else scene
         eq, _ = _solve_checked(sc, controls, jnp.asarray(starts[0], q0.dtype), options)
         return one_row(eq)
