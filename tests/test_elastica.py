@@ -25,6 +25,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 from checks import scaled_residual
+from marks import slow
 
 import pacjax as pj
 
@@ -169,7 +170,7 @@ def total_elongation(scene, q):
 
 
 # ------------------------------------------------------------------------------ linear limit
-@pytest.mark.parametrize("n_segments", [1, pytest.param(2, marks=pytest.mark.slow)])
+@pytest.mark.parametrize("n_segments", [1, slow(2)])
 def test_small_tip_load_matches_linear_beam_theory(n_segments):
     alpha = 0.03  # nonlinearity: the elastica's deflection is 1.0e-4 relative below alpha / 3
     load = alpha * EI / LENGTH**2
@@ -183,7 +184,7 @@ def test_small_tip_load_matches_linear_beam_theory(n_segments):
     assert abs(deflection / linear - 1.0) < 1e-3
 
 
-@pytest.mark.parametrize("n_segments", [1, pytest.param(2, marks=pytest.mark.slow)])
+@pytest.mark.parametrize("n_segments", [1, slow(2)])
 def test_small_self_weight_matches_linear_beam_theory(n_segments):
     beta = 0.03
     weight = beta * EI / LENGTH**3

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from dynamics_scenes import CONTROLS, SCENE, small_scene
 from jax.flatten_util import ravel_pytree
+from marks import slow
 
 import pacjax as pj
 from pacjax._dynamics.equations import (
@@ -45,8 +46,8 @@ def _end_error(jacobian, n_steps: int, reference) -> float:
     "jacobian",
     [
         None,
-        pytest.param("differences", marks=pytest.mark.slow),
-        pytest.param(lambda t, y, args: 0.8 * A, marks=pytest.mark.slow),
+        slow("differences"),
+        slow(lambda t, y, args: 0.8 * A),
         lambda t, y, args: jnp.diag(jnp.diag(A)),
     ],
     ids=["exact", "differences", "scaled", "diagonal"],
