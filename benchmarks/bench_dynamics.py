@@ -17,8 +17,8 @@ at ``--reference-rtol`` (``--reference-solver``; the same method 10^3 times tigh
 the exact motion, and Kvaerno5 is checked against it) over 11 save times. The batch:
 ``pj.simulate_batch`` of ``--batch`` step commands (each a pull of up to 40 mm on one random
 tendon) with its default solver (``--rows-at-once``: rows vectorised together; default one at a
-time on a CPU), its aggregate real-time factor ``batch * simulated time / warm wall time``.
-Nothing is asserted.
+time on a CPU, two threads side by side), its aggregate real-time factor ``batch * simulated
+time / warm wall time``. Nothing is asserted.
 """
 
 import argparse

@@ -1,6 +1,9 @@
 """Many simulations of one scene at once: :func:`simulate_batch`, :func:`pacjax._dynamics.simulate.
 simulate`'s program over rows, vectorised a group of rows at a time (all of them on an
-accelerator or over several devices, one at a time on a CPU)."""
+accelerator or over several devices, one at a time on a CPU, where each core takes rows as it
+finishes one)."""
+
+from concurrent.futures import ThreadPoolExecutor
 
 import diffrax
 import equinox as eqx
@@ -13,7 +16,7 @@ from .._model.inertia import PHI_INERTIA_FACTOR
 from .._model.inputs import check_q, check_scene, solver_dtype
 from .._model.scene import Scene
 from .._statics.batch import check_devices, row_sharding
-from .._statics.pool import pad_rows
+from .._statics.pool import CPU_LANES, pad_rows
 from .damping import Damping
 from .simulate import (
     ATOL,
@@ -66,8 +69,11 @@ def simulate_batch(
             Jacobian cannot be skipped (a
             ``vmap``-ped choice computes both sides), so each group steps with the stiff
             Jacobian every step; one row at a time keeps :func:`simulate`'s solver and its own
-            steps. Default: one on a CPU, where vectorising small rows saves little, and all
-            rows on an accelerator or when the rows are split over several devices.
+            steps, and on a single CPU device :data:`pacjax._statics.pool.CPU_LANES` threads
+            run the one compiled row side by side, each taking the next row when it finishes
+            one. Default: one on a CPU, where vectorising small rows costs more per row than
+            running them one after another, and all rows on an accelerator or when the rows
+            are split over several devices.
         solver: as in :func:`simulate` for one row at a time; for groups, the default at
             moderate tolerances is ``rosenbrock23("stiff")``.
         Everything else as in :func:`simulate` (no dense output).
@@ -133,8 +139,42 @@ def simulate_batch(
     if sharding is not None:
         batched = jax.device_put(batched, sharding)
     schedule = u if callable(u) else None
-    traj = _simulate_rows(scene, damping, schedule, batched, span, ts, dt0, opts, group)
+    args = (scene, damping, schedule, batched, span, ts, dt0, opts)
+    if _side_by_side(group, sharding, args):
+        return _rows_side_by_side(*args, rows=b)
+    traj = _simulate_rows(*args, group)
     return jtu.tree_map(lambda x: x[:b], traj)
+
+
+def _side_by_side(group: int, sharding, args) -> bool:
+    """Whether rows one at a time run in :data:`CPU_LANES` threads: on a single CPU device,
+    where one simulation keeps one core busy (its kernels are small), and not under a
+    transformation (a tracer belongs to the thread that traces)."""
+    traced = any(isinstance(x, jax.core.Tracer) for x in jtu.tree_leaves(args))
+    return group == 1 and sharding is None and jax.default_backend() == "cpu" and not traced
+
+
+def _rows_side_by_side(scene, damping, schedule, batched, span, ts, dt0, opts, rows: int):
+    """The first ``rows`` rows of ``batched``, each a call of one compiled simulation, run by
+    :data:`CPU_LANES` threads that each take the next row as they finish one (rows differ in
+    their steps, so halves fixed in advance would leave a core idle). A call a row, not a
+    ``lax.map`` over rows: on XLA:CPU the map's rows ran 1.5x slower than the same row alone
+    (``benchmarks/RESULTS.md``, "Simulation batches side by side")."""
+    batched = jtu.tree_map(np.asarray, batched)
+
+    def row(i):
+        return jtu.tree_map(lambda x: x[i], batched)
+
+    # Compiled once before the threads start, which then share it.
+    program = _simulate_row.lower(scene, damping, schedule, row(0), span, ts, dt0, opts)
+    program = program.compile()
+
+    def run(i):
+        return program(scene, damping, schedule, row(i), span, ts, dt0, opts)
+
+    with ThreadPoolExecutor(max_workers=min(CPU_LANES, rows)) as lanes:
+        trajs = list(lanes.map(run, range(rows)))
+    return jtu.tree_map(lambda *xs: jnp.stack(xs), *trajs)
 
 
 def _rows_at_once(rows_at_once: int | None, rows: int) -> int:
@@ -147,12 +187,19 @@ def _rows_at_once(rows_at_once: int | None, rows: int) -> int:
     return min(int(rows_at_once), rows)
 
 
+def _one_row(scene, damping, schedule, row, span, ts, dt0, opts):
+    u, q, v = row if schedule is None else (schedule, *row)
+    q = aligned_rest_start(scene, u, q, v, span[0])
+    return integrate(scene, damping, u, q, v, span, ts, dt0, opts)
+
+
+_simulate_row = eqx.filter_jit(_one_row)
+
+
 @eqx.filter_jit
 def _simulate_rows(scene, damping, schedule, batched, span, ts, dt0, opts, group):
     def one(row):
-        u, q, v = row if schedule is None else (schedule, *row)
-        q = aligned_rest_start(scene, u, q, v, span[0])
-        return integrate(scene, damping, u, q, v, span, ts, dt0, opts)
+        return _one_row(scene, damping, schedule, row, span, ts, dt0, opts)
 
     if group >= jtu.tree_leaves(batched)[0].shape[0]:
         return jax.vmap(one)(batched)
