@@ -22,11 +22,11 @@ is evaluated with one forward-mode derivative of the kinematics (``v, dR/dt = jv
 What the simulator uses (:func:`body_dynamics`) takes the Jacobians from the segments'
 structure, as the statics' Hessian does: segment ``j``'s coordinates move its own points
 through its local kinematics and everything beyond its end rigidly, so each segment's
-kinematics is differentiated along its own coordinates only, and the accelerations are one
-forward derivative of ``J(q) qdot`` (:func:`structured_body_dynamics`). Two references check
-it: the same quantities by forward derivatives of the whole chained kinematics
-(:func:`chained_body_dynamics`, also the path for mass points at sites known only at run
-time), and Lagrange's equations ``d/dt(dT/dqdot) - dT/dq`` by ``jvp``/``grad``
+kinematics is differentiated along its own coordinates only (:func:`structured_body_dynamics`);
+the accelerations at zero ``qddot`` are the frames' second derivative along ``qdot``, two nested
+``jvp`` of the chained kinematics, in both. Two references check it: ``M`` and ``C qdot`` by
+forward derivatives of the whole chained kinematics (:func:`chained_body_dynamics`, also the
+path for mass points at sites known only at run time), and Lagrange's equations ``d/dt(dT/dqdot) - dT/dq`` by ``jvp``/``grad``
 (:func:`coriolis_forces`); all agree to round-off (tested).
 
 PCC's and PAC's bending-plane angle ``phi`` moves no mass when its segment is straight, so
@@ -164,7 +164,7 @@ def mass_matrix(
     groups = inertia_sites(scene, q.dtype)
     if len(groups) > 1:
         return chained_body_dynamics(scene, q, jnp.zeros_like(q), phi_inertia)[0]
-    knots, masses, moments = _site_knots(scene, q.dtype)
+    knots, _, masses, moments = _site_knots(scene, q.dtype)
     jac_pos, jac_ang = _site_jacobians(scene, q, knots)
     return _mass_from_jacobians(scene, jac_pos, jac_ang, masses, moments, phi_inertia)
 
@@ -236,13 +236,7 @@ def chained_body_dynamics(
         def kinematics(x, segs=segs, s=s):
             return scene.frames(x, segs, s)
 
-        def velocities(x, kinematics=kinematics):
-            (rot, _), (rot_dot, vel) = jax.jvp(kinematics, (x,), (qdot,))
-            return vel, _vee_skew(
-                jnp.matmul(jnp.swapaxes(rot, -1, -2), rot_dot, precision=MATMUL_PRECISION)
-            )
-
-        (_, omega), (acc, alpha) = jax.jvp(velocities, (q,), (qdot,))
+        omega, acc, alpha = _site_accelerations(scene, segs, s, q, qdot)
         (rot, _), lin = jax.linearize(kinematics, q)
         d_rot, d_pos = jax.vmap(lin)(jnp.eye(n, dtype=dtype))  # (n, p, 3, 3), (n, p, 3)
         mat = mat + jnp.einsum("ipa,p,jpa->ij", d_pos, masses, d_pos, precision=MATMUL_PRECISION)
@@ -260,6 +254,21 @@ def chained_body_dynamics(
     if extra is not None:
         mat = mat + jnp.diag(extra)
     return 0.5 * (mat + mat.T), bias
+
+
+def _site_accelerations(scene: Scene, segs, s, q, qdot):
+    """Body angular velocities ``omega`` of the points ``(segs, s)`` and their world and
+    angular accelerations at zero ``qddot`` (``a_0 = (dJ/dq qdot) qdot``, ``alpha_0``): the
+    second directional derivative of their frames along ``qdot`` (nested ``jvp``)."""
+
+    def velocities(x):
+        (rot, _), (rot_dot, vel) = jax.jvp(lambda y: scene.frames(y, segs, s), (x,), (qdot,))
+        return vel, _vee_skew(
+            jnp.matmul(jnp.swapaxes(rot, -1, -2), rot_dot, precision=MATMUL_PRECISION)
+        )
+
+    (_, omega), (acc, alpha) = jax.jvp(velocities, (q,), (qdot,))
+    return omega, acc, alpha
 
 
 class _SegmentFrames(NamedTuple):
@@ -341,34 +350,11 @@ def _site_jacobians(
     return at_sites(jac_pos), at_sites(jac_ang)
 
 
-def _site_velocities(
-    scene: Scene, q: Float[Array, " n_dofs"], qdot: Float[Array, " n_dofs"], knots: Knots
-) -> tuple[Float[Array, "p 3"], Float[Array, "p 3"]]:
-    """World velocities and body angular velocities of the mass points: :func:`_site_jacobians`
-    times ``qdot`` without forming the Jacobians. The twists of the segments' ends add up: a
-    point ``x`` of segment ``i`` moves rigidly with ``(sum_{j<i} w_j) x x + sum_{j<i} (t_j -
-    w_j x e_j)``, plus its own segment's local motion."""
-    f = _segment_frames(scene, q, knots)
-    rates = jax.jvp(scene.coordinates, (q,), (qdot,))[1]  # (n, d), zero on pinned coordinates
-    mm = MATMUL_PRECISION
-    loc_rot = jnp.einsum("ipabk,ik->ipab", f.d_rot, rates, precision=mm)
-    loc_pos = jnp.einsum("ipak,ik->ipa", f.d_pos, rates, precision=mm)
-    own_vel = matvec3(f.base_rot[:, None], loc_pos)
-    own_ang = _vee_skew(matmul3(jnp.swapaxes(f.rot, -1, -2), loc_rot))
-    end_turn = matmul3(loc_rot[:, -1], jnp.swapaxes(f.rot[:, -1], -1, -2))
-    end_ang = matvec3(f.base_rot, _vee_skew(end_turn))
-    spin = jnp.cumsum(end_ang, axis=0) - end_ang  # the angular velocity of each segment's base
-    shift = own_vel[:, -1] - jnp.cross(end_ang, f.world_pos[:, -1])
-    drift = jnp.cumsum(shift, axis=0) - shift
-    vel = drift[:, None] + jnp.cross(spin[:, None], f.world_pos) + own_vel
-    omega = matvec3(jnp.swapaxes(f.world_rot, -1, -2), spin[:, None]) + own_ang
-    return knots.select(vel), knots.select(omega)
-
-
 def _site_knots(scene: Scene, dtype):
     """The single group of mass points with known sites, and the knots that hold them."""
     ((segs, s, masses, moments),) = inertia_sites(scene, dtype)
-    return Knots(scene.n_segments, segs, s, scene.kinematics.min_intervals), masses, moments
+    knots = Knots(scene.n_segments, segs, s, scene.kinematics.min_intervals)
+    return knots, (segs, s), masses, moments
 
 
 def structured_body_dynamics(
@@ -379,13 +365,12 @@ def structured_body_dynamics(
 ) -> tuple[Float[Array, "n_dofs n_dofs"], Float[Array, " n_dofs"]]:
     """:func:`chained_body_dynamics`' ``M`` and ``C qdot`` from the segments' local
     Jacobians (:func:`_site_jacobians`), for mass points whose sites are all known."""
-    knots, masses, moments = _site_knots(scene, q.dtype)
+    knots, (segs, s), masses, moments = _site_knots(scene, q.dtype)
     jac_pos, jac_ang = _site_jacobians(scene, q, knots)
-    # The accelerations at zero qddot, a_0 = (dJ/dq qdot) qdot: the velocities' derivative
-    # along qdot.
-    (_, omega), (acc, alpha) = jax.jvp(
-        lambda x: _site_velocities(scene, x, qdot, knots), (q,), (qdot,)
-    )
+    # The accelerations by forward derivatives of the frames alone, not of the Jacobians'
+    # segment-local derivatives along qdot: those carried third derivatives of the kinematics
+    # and took 1.6x as long (``benchmarks/RESULTS.md``, "Simulation batches side by side").
+    omega, acc, alpha = _site_accelerations(scene, segs, s, q, qdot)
     mm = MATMUL_PRECISION
     euler = moments * alpha + jnp.cross(omega, moments * omega)
     bias = jnp.einsum("pia,p,pa->i", jac_pos, masses, acc, precision=mm)
