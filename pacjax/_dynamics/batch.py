@@ -157,9 +157,9 @@ def _side_by_side(group: int, sharding, args) -> bool:
 def _rows_side_by_side(scene, damping, schedule, batched, span, ts, dt0, opts, rows: int):
     """The first ``rows`` rows of ``batched``, each a call of one compiled simulation, run by
     :data:`CPU_LANES` threads that each take the next row as they finish one (rows differ in
-    their steps, so halves fixed in advance would leave a core idle). A call a row, not a
-    ``lax.map`` over rows: on XLA:CPU the map's rows ran 1.5x slower than the same row alone
-    (``benchmarks/RESULTS.md``, "Simulation batches side by side")."""
+    their steps, so halves fixed in advance would leave a core idle). Each call runs a program
+    of one row, not a ``lax.map`` over one row: XLA:CPU ran that map 7x slower than the row
+    alone (``benchmarks/RESULTS.md``, "Simulation batches side by side")."""
     batched = jtu.tree_map(np.asarray, batched)
 
     def row(i):
