@@ -26,8 +26,9 @@ kinematics is differentiated along its own coordinates only (:func:`structured_b
 the accelerations at zero ``qddot`` are the frames' second derivative along ``qdot``, two nested
 ``jvp`` of the chained kinematics, in both. Two references check it: ``M`` and ``C qdot`` by
 forward derivatives of the whole chained kinematics (:func:`chained_body_dynamics`, also the
-path for mass points at sites known only at run time), and Lagrange's equations ``d/dt(dT/dqdot) - dT/dq`` by ``jvp``/``grad``
-(:func:`coriolis_forces`); all agree to round-off (tested).
+path for mass points at sites known only at run time), and Lagrange's equations
+``d/dt(dT/dqdot) - dT/dq`` by ``jvp``/``grad`` (:func:`coriolis_forces`); all agree to
+round-off (tested).
 
 PCC's and PAC's bending-plane angle ``phi`` moves no mass when its segment is straight, so
 ``M`` is singular there (the same polar singularity as the Hessian of the elastic energy). A
