@@ -155,25 +155,24 @@ def _side_by_side(group: int, sharding, args) -> bool:
 
 
 def _rows_side_by_side(scene, damping, schedule, batched, span, ts, dt0, opts, rows: int):
-    """The first ``rows`` rows of ``batched``, each a call of one compiled simulation, run by
+    """The first ``rows`` rows of ``batched``, each simulated as :func:`simulate` runs it (its
+    start's alignment, then :func:`integrate`: the same compiled programs, so a batch after a
+    simulation of the scene, or a simulation after a batch, compiles nothing), by
     :data:`CPU_LANES` threads that each take the next row as they finish one (rows differ in
-    their steps, so halves fixed in advance would leave a core idle). Each call runs a program
-    of one row, not a ``lax.map`` over one row: XLA:CPU ran that map 7x slower than the row
-    alone (``benchmarks/RESULTS.md``, "Simulation batches side by side")."""
+    their steps, so halves fixed in advance would leave a core idle). A call a row, not a
+    ``lax.map``: XLA:CPU ran a map over one row 7x slower than the row alone
+    (``benchmarks/RESULTS.md``, "Simulation batches side by side")."""
     batched = jtu.tree_map(np.asarray, batched)
 
-    def row(i):
-        return jtu.tree_map(lambda x: x[i], batched)
-
-    # Compiled once before the threads start, which then share it.
-    program = _simulate_row.lower(scene, damping, schedule, row(0), span, ts, dt0, opts)
-    program = program.compile()
-
     def run(i):
-        return program(scene, damping, schedule, row(i), span, ts, dt0, opts)
+        row = jtu.tree_map(lambda x: x[i], batched)
+        u, q, v = row if schedule is None else (schedule, *row)
+        q = aligned_rest_start(scene, u, q, v, span[0])
+        return integrate(scene, damping, u, q, v, span, ts, dt0, opts)
 
+    first = run(0)  # compiles the programs (or finds them) before the threads share them
     with ThreadPoolExecutor(max_workers=min(CPU_LANES, rows)) as lanes:
-        trajs = list(lanes.map(run, range(rows)))
+        trajs = [first, *lanes.map(run, range(1, rows))]
     return jtu.tree_map(lambda *xs: jnp.stack(xs), *trajs)
 
 
@@ -187,19 +186,12 @@ def _rows_at_once(rows_at_once: int | None, rows: int) -> int:
     return min(int(rows_at_once), rows)
 
 
-def _one_row(scene, damping, schedule, row, span, ts, dt0, opts):
-    u, q, v = row if schedule is None else (schedule, *row)
-    q = aligned_rest_start(scene, u, q, v, span[0])
-    return integrate(scene, damping, u, q, v, span, ts, dt0, opts)
-
-
-_simulate_row = eqx.filter_jit(_one_row)
-
-
 @eqx.filter_jit
 def _simulate_rows(scene, damping, schedule, batched, span, ts, dt0, opts, group):
     def one(row):
-        return _one_row(scene, damping, schedule, row, span, ts, dt0, opts)
+        u, q, v = row if schedule is None else (schedule, *row)
+        q = aligned_rest_start(scene, u, q, v, span[0])
+        return integrate(scene, damping, u, q, v, span, ts, dt0, opts)
 
     if group >= jtu.tree_leaves(batched)[0].shape[0]:
         return jax.vmap(one)(batched)
