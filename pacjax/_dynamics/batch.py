@@ -160,7 +160,7 @@ def _rows_side_by_side(scene, damping, schedule, batched, span, ts, dt0, opts, r
     simulation of the scene, or a simulation after a batch, compiles nothing), by
     :data:`CPU_LANES` threads that each take the next row as they finish one (rows differ in
     their steps, so halves fixed in advance would leave a core idle). A call a row, not a
-    ``lax.map``: XLA:CPU ran a map over one row 7x slower than the row alone
+    ``lax.map``: XLA:CPU ran a map over one row several times slower than the row alone
     (``benchmarks/RESULTS.md``, "Simulation batches side by side")."""
     batched = jtu.tree_map(np.asarray, batched)
 

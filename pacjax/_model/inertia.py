@@ -368,9 +368,8 @@ def structured_body_dynamics(
     Jacobians (:func:`_site_jacobians`), for mass points whose sites are all known."""
     knots, (segs, s), masses, moments = _site_knots(scene, q.dtype)
     jac_pos, jac_ang = _site_jacobians(scene, q, knots)
-    # The accelerations by forward derivatives of the frames alone, not of the Jacobians'
-    # segment-local derivatives along qdot: those carried third derivatives of the kinematics
-    # and took 1.6x as long (``benchmarks/RESULTS.md``, "Simulation batches side by side").
+    # The accelerations by forward derivatives of the frames alone: a derivative of the
+    # segments' local Jacobians along qdot would carry the kinematics' third derivatives.
     omega, acc, alpha = _site_accelerations(scene, segs, s, q, qdot)
     mm = MATMUL_PRECISION
     euler = moments * alpha + jnp.cross(omega, moments * omega)
