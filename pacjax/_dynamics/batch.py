@@ -61,8 +61,9 @@ def simulate_batch(
         q0, qdot0: ``(b, n_dofs)`` initial states, or one ``(n_dofs,)`` for all (default
             straight and at rest). The batch size ``b`` is that of the batched arguments (at
             least one of ``controls``, ``q0``, ``qdot0`` has a row per simulation).
-        devices: local devices to split the rows over (default all); the rows are padded to a
-            multiple of it.
+        devices: local devices to split the rows over (default all; on a CPU one, since host
+            devices share the cores that its rows side by side already keep busy); the rows
+            are padded to a multiple of it.
         rows_at_once: rows integrated as one vectorised integration (groups of this many,
             one group after another; over several devices all rows are one group). In a
             group every row takes as many steps as the one that needs most, and a held
@@ -124,6 +125,8 @@ def simulate_batch(
     q = rows_of(q0, lambda x: check_q(scene, x, dtype), "q0")
     v = rows_of(qdot0, lambda x: check_qdot(scene, x, dtype), "qdot0")
     n_devices = check_devices(devices)
+    if devices is None and rows_at_once is None and jax.default_backend() == "cpu":
+        n_devices = 1
     padded = -(-b // n_devices) * n_devices
     group = _rows_at_once(rows_at_once, padded)
     if n_devices > 1:  # rows sharded over devices are one group: a map over them would gather
