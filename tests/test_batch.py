@@ -140,8 +140,8 @@ def test_only_the_first_pool_of_a_kind_runs_an_idle_round(scene, monkeypatch):
     round_ = pool._round
 
     def spy(*args):
-        active = args[11]
-        idle.append(not np.any(active))
+        slots, pending = args[7], args[8]
+        idle.append(not len(pending[0]) and not np.any(np.asarray(slots[4]) >= 0))
         return round_(*args)
 
     monkeypatch.setattr(pool, "_round", spy)

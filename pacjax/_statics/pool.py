@@ -1,8 +1,9 @@
-"""The slot pool of :func:`pacjax.solve_batch`: rows solved a few continuation steps at a time,
-each slot refilled as soon as its row has finished.
+"""The slot pool of :func:`pacjax.solve_batch`: rows solved side by side in a fixed number of
+slots, each slot refilled as soon as its row has finished.
 
-One compiled, ``vmap``-ed call (:func:`_advance`) runs the continuation of every slot for
-:func:`_steps_per_round` steps; the starting points come a block of rows at a time
+One compiled, ``vmap``-ed call (:func:`_advance`) steps every slot's continuation and, on the
+device, hands each slot that finishes the next pending row; the host collects the finished
+rows and hands over more between calls. The starting points come a block of rows at a time
 (:class:`_StartBlocks`). On a single CPU device two pools take rows from one queue, each in its
 own thread (:func:`pool_lanes`); with several devices the pool is sharded along the slots.
 """
@@ -22,29 +23,10 @@ from .._jit import jit
 from .equilibrium import equilibrium_from, make_solver, max_total_steps, start_point
 from .problem import ScaledProblem
 
-#: Continuation steps per round of the slot pool (a finished row waits at most this many
-#: steps for its slot to be refilled; see :func:`_steps_per_round`).
-STEPS_PER_ROUND = 8
-#: The same while rows wait in the queue for a slot, per backend (see :func:`_steps_per_round`).
-QUEUED_STEPS_PER_ROUND = {"cpu": 6}
-
-
-def _steps_per_round(rows_waiting: bool = False) -> int:
-    """Steps per round on the default backend. Fewer steps per round leave a finished slot
-    idle for fewer steps; more pay the host's work between rounds (dispatch, refilling the
-    slots, and each slot's restart state and result, computed for every slot in every round)
-    less often, which decides small pools (a fit's batches of 16 frames) and accelerators. On
-    XLA:CPU 8 was as fast as 2 on 2,000 rows in a pool of 128 and faster on small pools; while
-    rows wait for a slot, a finished row's idle steps cost a waiting row's progress, and rounds
-    of 6 are faster there. On a GPU rounds of 8 beat rounds of 4 on every batch measured
-    (``benchmarks/RESULTS.md``, "Figures behind the solver's settings", "A first step as long
-    as Newton's" and "The side by side on a GPU").
-    """
-    backend = jax.default_backend()
-    if rows_waiting and backend in QUEUED_STEPS_PER_ROUND:
-        return QUEUED_STEPS_PER_ROUND[backend]
-    return STEPS_PER_ROUND
-
+#: Steps one call of the pool (:func:`_advance`) runs at most: a call ends sooner, once a slot
+#: is free and no row is pending for it, or once every slot is done. The cap bounds how long
+#: finished rows wait to be reported while slow rows run on.
+MAX_STEPS_PER_CALL = 64
 
 _TAGS = frozenset()
 
@@ -62,51 +44,119 @@ def _start_block(scene, opts, update, controls, params, q0):
 
 
 @jit
-def _advance(scene, opts, update, controls, params, y, state, reset, y_reset, active, per_round):
-    """One round of the slot pool: restart the ``reset`` slots from ``y_reset`` (scaled
-    starting points from :func:`_start_block`, computed once per row rather than for every slot
-    in every round), then run every active slot's continuation for up to ``per_round`` steps
-    (fewer when all are done; an array, so that rounds of either length share one program).
+def _advance(scene, opts, update, slots, pending, n_pending, drain, max_steps):
+    """Steps of the slot pool, each slot refilled on the device as soon as its row is done.
+
+    ``slots = (u, p, y, state, row)``: every slot's commands, parameters, scaled iterate and
+    solver state, and whether it holds a row (``row >= 0``; -1: free); ``pending =
+    (u, p, y)``: the next ``n_pending`` rows (local indices ``size + k``) and their scaled
+    starting points (from :func:`_start_block`). Each step advances every running slot by one
+    continuation step, then hands the pending rows, in order, to the slots that are free. The
+    call returns once every slot is done if ``drain`` (no more rows will come), else as soon as
+    a slot is free and no pending row is left for it (the host then hands over more), and after
+    ``max_steps`` steps at most. So no slot waits for a row while rows are pending, and the
+    host's work between calls is paid once per pool's worth of rows.
 
     The steps are those of :func:`pacjax._statics.equilibrium.solve_core` (the same root finder,
-    resumed round after round), so a row's iterates do not depend on which rows share the pool.
-    Returns the new ``(y, state)``, whether each slot is done, and its :class:`Equilibrium`.
+    resumed call after call), so a row's iterates do not depend on which rows share the pool.
+    Returns the new ``slots``, the number of pending rows started, whether each local row
+    (the ``size`` slots' rows at entry, then the pending ones) finished, and their
+    :class:`Equilibrium` (valid where finished).
     """
-    dtype = controls.dtype
+    dtype = pending[0].dtype
     limit = max_total_steps(opts)
     fn = ScaledProblem.root_fn
+    size = slots[2].shape[0]
 
-    def one(u, p, y_, st_, reset_, y_start, active_):
-        sc = scene if update is None else update(scene, p)
-        problem = ScaledProblem.build(sc, u)
-        solver = make_solver(sc, opts, dtype)
+    # Without per-row parameters the problems differ by their commands only: the scene's
+    # parameter-only terms are computed once here, not in every step.
+    shared = None if update is not None else ScaledProblem.build(scene, pending[0][0])
+
+    def row_problem(u, p):
+        if shared is not None:
+            return (
+                scene,
+                eqx.tree_at(lambda pr: pr.controls, shared, u),
+                make_solver(scene, opts, dtype),
+            )
+        sc = update(scene, p)
+        return sc, ScaledProblem.build(sc, u), make_solver(sc, opts, dtype)
+
+    def running(solver, problem, y, st):
+        # As optimistix.root_find: stop when the solver terminates, y is not finite or the
+        # step budget is spent.
+        done, _ = solver.terminate(fn, y, problem, None, st, _TAGS)
+        return ~done & jnp.all(jnp.isfinite(y)) & (st.step < limit)
+
+    def step_one(u, p, y, st, held):
+        sc, problem, solver = row_problem(u, p)
+        run = held & running(solver, problem, y, st)
+        y_new, st_new, _ = solver.step(fn, y, problem, None, st, _TAGS)
+        y = jnp.where(run, y_new, y)
+        st = jtu.tree_map(lambda a, b: jnp.where(run, a, b), st_new, st)
+        finished = held & ~running(solver, problem, y, st)
+        eq = equilibrium_from(sc, problem, solver, y, st, st.step, opts.tol)
+        return y, st, finished, eq
+
+    def start_one(u, p, y):
+        _, problem, solver = row_problem(u, p)
         # (eqx.filter_eval_shape keeps the static load sites Python numbers, as root_find does)
-        f_struct, aux_struct = eqx.filter_eval_shape(fn, y_, problem)
-        st_start = solver.init(fn, y_start, problem, None, f_struct, aux_struct, _TAGS)
-        y_ = jnp.where(reset_, y_start, y_)
-        st_ = jtu.tree_map(lambda a, b: jnp.where(reset_, a, b), st_start, st_)
+        f_struct, aux_struct = eqx.filter_eval_shape(fn, y, problem)
+        return solver.init(fn, y, problem, None, f_struct, aux_struct, _TAGS)
 
-        def running(y, st):
-            # As optimistix.root_find: stop when the solver terminates, y is not finite or
-            # the step budget is spent.
-            done, _ = solver.terminate(fn, y, problem, None, st, _TAGS)
-            finite = jnp.all(jnp.isfinite(y))
-            return active_ & ~done & finite & (st.step < limit)
+    def refill(slots, started):
+        # The free slots, in order, take the next pending rows.
+        u, p, y, st, row = slots
+        free = row < 0
+        k = started + jnp.cumsum(free) - 1
+        take = free & (k < n_pending)
+        k = jnp.clip(k, 0, pending[0].shape[0] - 1)
+        u_new, p_new, y_new = jtu.tree_map(lambda x: x[k], pending)
+        st_new = jax.vmap(start_one)(u_new, p_new, y_new)
 
-        def cond(carry):
-            y, st, k = carry
-            return (k < per_round) & running(y, st)
+        def pick(a, b):
+            return jnp.where(take.reshape((-1,) + (1,) * (a.ndim - 1)), a, b)
 
-        def body(carry):
-            y, st, k = carry
-            y, st, _ = solver.step(fn, y, problem, None, st, _TAGS)
-            return y, st, k + 1
+        u, p, y, st = jtu.tree_map(pick, (u_new, p_new, y_new, st_new), (u, p, y, st))
+        row = jnp.where(take, size + k, row).astype(row.dtype)
+        return (u, p, y, st, row), started + jnp.sum(take, dtype=started.dtype)
 
-        y_, st_, _ = jax.lax.while_loop(cond, body, (y_, st_, jnp.asarray(0)))
-        eq = equilibrium_from(sc, problem, solver, y_, st_, st_.step, opts.tol)
-        return y_, st_, ~running(y_, st_), eq
+    def eq_one(u, p, y, st):
+        sc, problem, solver = row_problem(u, p)
+        return equilibrium_from(sc, problem, solver, y, st, st.step, opts.tol)
 
-    return jax.vmap(one)(controls, params, y, state, reset, y_reset, active)
+    eq_shape = jax.eval_shape(jax.vmap(eq_one), *slots[:4])
+    n_local = size + pending[0].shape[0]
+    out = jtu.tree_map(lambda s: jnp.zeros((n_local,) + s.shape[1:], s.dtype), eq_shape)
+    finished_rows = jnp.zeros(n_local, bool)
+
+    def cond(carry):
+        slots, started, _, _, steps = carry
+        held = slots[4] >= 0
+        # Return to the host for more rows once a slot is free and none is pending.
+        fed = drain | (started < n_pending) | jnp.all(held)
+        return jnp.any(held) & fed & (steps < max_steps)
+
+    def body(carry):
+        (u, p, y, st, row), started, out, finished_rows, steps = carry
+        y, st, finished, eq = jax.vmap(step_one)(u, p, y, st, row >= 0)
+        at = jnp.where(finished, row, n_local)  # out of range: dropped
+        out = jtu.tree_map(lambda o, e: o.at[at].set(e, mode="drop"), out, eq)
+        finished_rows = finished_rows.at[at].set(True, mode="drop")
+        row = jnp.where(finished, -1, row)
+        slots = (u, p, y, st, row)
+        # A real branch (its predicate is not batched): most steps hand over no row.
+        wanted = jnp.any(finished) & (started < n_pending)
+        slots, started = jax.lax.cond(wanted, refill, lambda *a: a, slots, started)
+        return slots, started, out, finished_rows, steps + 1
+
+    # Local indices: the row a slot holds at entry is the slot's own index.
+    held = slots[4]
+    slots = (*slots[:4], jnp.where(held >= 0, jnp.arange(size, dtype=held.dtype), -1))
+    slots, started = refill(slots, jnp.asarray(0, jnp.int32))
+    carry = (slots, started, out, finished_rows, jnp.asarray(0))
+    slots, started, out, finished_rows, _ = jax.lax.while_loop(cond, body, carry)
+    return slots, started, finished_rows, out
 
 
 #: Solver slots per CPU device. On XLA:CPU a row-step costs about the same in a pool of 128 as in
@@ -124,26 +174,45 @@ def pool_slots(chunk: int, n_devices: int) -> int:
     return -(-slots // n_devices) * n_devices
 
 
-def _initial_state(scene, opts, size, dtype, sharding):
-    """Placeholder ``(y, state)`` of a pool of ``size`` slots: zeros of the solver state's
-    shapes. Their values are never read: a slot runs only after :func:`_advance` has reset it
-    to a row's start, and an idle slot's outputs are dropped."""
+def _initial_slots(scene, opts, size, n_controls, params, dtype, sharding):
+    """Placeholder slots of a pool of ``size`` (:func:`_advance`'s ``slots``), every slot free:
+    zeros of the commands', parameters' and solver state's shapes. Their values are never read:
+    a slot runs only after :func:`_advance` has handed it a row."""
     solver = make_solver(scene, opts, dtype)
-    return _placeholder(solver, scene.n_dofs, np.dtype(dtype), size, sharding)
+    p_shapes = _param_shapes(params)
+    zeros = _placeholder(solver, scene.n_dofs, n_controls, p_shapes, np.dtype(dtype), size)
+    free = np.full(size, -1, np.int32)
+    return jax.device_put((*zeros, free), sharding)
+
+
+def _param_shapes(params):
+    """A row's parameters' shapes and dtypes (hashable), or None without parameters."""
+    if params is None:
+        return None
+    leaves, tree = jtu.tree_flatten(params)
+    return tree, tuple((np.shape(x)[1:], np.asarray(x).dtype.str) for x in leaves)
 
 
 @functools.lru_cache(maxsize=16)
-def _placeholder(solver, n: int, dtype, size: int, sharding):
-    # Made from shapes alone, once per solver, size and sharding: ``solver.init`` run op by op
-    # compiled a dozen small programs in every new process and cost more than the rounds of a
-    # small batch (the arrays are immutable, so pools can share them).
+def _placeholder(solver, n: int, n_controls: int, p_shapes, dtype, size: int):
+    # Made from shapes alone, once per solver and size: ``solver.init`` run op by op compiled a
+    # dozen small programs in every new process and cost more than the steps of a small batch.
     f_struct = jax.ShapeDtypeStruct((n,), dtype)
     shapes = jax.eval_shape(
         lambda y: (y, solver.init(None, y, None, None, f_struct, None, _TAGS)), f_struct
     )
     # Strongly typed, as _advance returns them (a weak type would compile a second version).
-    zeros = jtu.tree_map(lambda x: np.zeros((size,) + x.shape, x.dtype), shapes)
-    return jax.device_put(zeros, sharding)
+    y, state = jtu.tree_map(lambda x: np.zeros((size,) + x.shape, x.dtype), shapes)
+    u = np.zeros((size, n_controls), dtype)
+    p = _zero_params(p_shapes, size)
+    return u, p, y, state
+
+
+def _zero_params(p_shapes, size):
+    if p_shapes is None:
+        return np.zeros((size,))
+    tree, leaves = p_shapes
+    return jtu.tree_unflatten(tree, [np.zeros((size,) + s, d) for s, d in leaves])
 
 
 class _StartBlocks:
@@ -248,7 +317,10 @@ def pool_solve(
     queue_ = _RowQueue(controls.shape[0], blocks)
     ready = _RoundCompile(scene, controls, params, update, opts, size, dtype, sharding)
     ready.start()
-    args = (scene, controls, queue_, params, update, opts, size, dtype, sharding)
+    # Each pool takes at most its share of the rows: a pool holds the rows it has taken until
+    # its slots come free, and one that took the last rows would keep the others waiting.
+    share = -(-controls.shape[0] // lanes)
+    args = (scene, controls, queue_, share, params, update, opts, size, dtype, sharding)
     if lanes == 1:
         try:
             yield from _pool_lane(*args, ready=ready)
@@ -293,6 +365,7 @@ def _pool_lane(
     scene,
     controls,
     rows_queue,
+    share,
     params,
     update,
     opts,
@@ -302,73 +375,63 @@ def _pool_lane(
     stop=None,
     ready=None,
 ):
-    """One pool of ``size`` slots taking rows from ``rows_queue`` until it is empty (or
-    ``stop`` is set); its rounds wait for ``ready`` (the round compiled, see
+    """One pool of ``size`` slots taking rows from ``rows_queue`` until it is empty, it has
+    taken ``share`` rows, or ``stop`` is set; its calls wait for ``ready`` (the pool compiled, see
     :class:`_RoundCompile`)."""
-    slot_row = np.full(size, -1)
-    u_pool, p_pool, y_pool = _empty_pool(scene, controls, params, size)
-    q_pool = np.zeros((size, scene.n_dofs))
-    y, state = _initial_state(scene, opts, size, dtype, sharding)
+    slots = _initial_slots(scene, opts, size, controls.shape[1], params, dtype, sharding)
+    slot_row = np.full(size, -1)  # the batch row each slot holds
+    # Rows taken from the queue and not yet handed to a slot: their rows, q and scaled y.
+    pending = (np.zeros(0, int), np.zeros((0, scene.n_dofs)), np.zeros((0, scene.n_dofs)))
+    q_start = {}
     while stop is None or not stop.is_set():
-        free = np.flatnonzero(slot_row < 0)
-        rows, q_new, y_new = rows_queue.take(len(free))
-        free = free[: len(rows)]
-        reset = np.zeros(size, bool)
-        reset[free] = True
-        slot_row[free] = rows
-        u_pool[free] = controls[rows]
-        q_pool[free], y_pool[free] = q_new, y_new
-        if params is not None:
-
-            def assign(pool, x, free=free, rows=rows):
-                pool[free] = x[rows]
-
-            jtu.tree_map(assign, p_pool, params)
-        active = slot_row >= 0
-        if not active.any():
+        rows, q_new, y_new = rows_queue.take(min(size - len(pending[0]), share))
+        share -= len(rows)
+        new = (rows, q_new, y_new)
+        pending = tuple(np.concatenate([a, b]) for a, b in zip(pending, new, strict=True))
+        q_start.update(zip(rows.tolist(), q_new, strict=True))
+        drain = share == 0 or not rows_queue.waiting()
+        if not len(pending[0]) and not (slot_row >= 0).any():
             return
         if ready is not None:
             ready.wait()
-        pool = (u_pool, p_pool, y, state, reset, y_pool, active)
-        waiting = rows_queue.waiting()
-        y, state, done, eq = _round(scene, opts, update, dtype, sharding, *pool, waiting)
-        done = np.asarray(done) & active
-        if done.any():
-            slots = np.flatnonzero(done)
-            eq_rows = jtu.tree_map(lambda x, s=slots: np.asarray(x)[s], eq)
-            yield slot_row[slots], q_pool[slots].copy(), eq_rows
-            slot_row[slots] = -1
+        slots, started, finished, eq = _round(
+            scene, opts, update, dtype, sharding, controls, params, slots, pending, size, drain
+        )
+        local = np.concatenate([slot_row, pending[0], np.full(size - len(pending[0]), -1)])
+        held = np.asarray(slots[4])
+        slot_row = np.where(held >= 0, local[np.maximum(held, 0)], -1)
+        pending = tuple(x[int(started) :] for x in pending)
+        done = np.flatnonzero(np.asarray(finished))
+        if len(done):
+            rows_done = local[done]
+            eq_rows = jtu.tree_map(lambda x, d=done: np.asarray(x)[d], eq)
+            yield rows_done, np.stack([q_start.pop(r) for r in rows_done.tolist()]), eq_rows
 
 
-def _empty_pool(scene, controls, params, size):
-    """Host buffers of a pool's commands, parameters and scaled starting points."""
-    u_pool = np.zeros((size, controls.shape[1]))
-    y_pool = np.zeros((size, scene.n_dofs))
+def _round(scene, opts, update, dtype, sharding, controls, params, slots, pending, size, drain):
+    """One :func:`_advance` call: the ``pending`` rows (``(rows, q, y)``, at most ``size``)
+    padded to ``size`` and handed over with their commands and parameters."""
+    rows, _, y = pending
+    n = len(rows)
+    take = np.concatenate([rows, np.zeros(size - n, int)]) if n else np.zeros(size, int)
+    u = controls[take]
     if params is None:
-        p_pool = np.zeros((size,))
+        p = np.zeros((size,))
     else:
-        p_pool = jtu.tree_map(lambda x: np.zeros((size,) + x.shape[1:], x.dtype), params)
-    return u_pool, p_pool, y_pool
-
-
-def _round(
-    scene, opts, update, dtype, sharding, u_pool, p_pool, y, state, reset, y_pool, active, waiting
-):
-    """One :func:`_advance` round from the pool's host buffers; ``waiting``: whether rows wait
-    in the queue for a slot (:func:`_steps_per_round`)."""
-    inputs = (
-        jnp.asarray(u_pool, dtype),
-        jtu.tree_map(jnp.asarray, p_pool),
-        jnp.asarray(reset),
-        jnp.asarray(y_pool, dtype),
-        jnp.asarray(active),
-    )
+        p = jtu.tree_map(lambda x: np.asarray(x)[take], params)
+    y = np.concatenate([y, np.zeros((size - n, y.shape[1]))])
+    inputs = (jnp.asarray(u, dtype), jtu.tree_map(jnp.asarray, p), jnp.asarray(y, dtype))
     if sharding is not None:
         inputs = jax.device_put(inputs, sharding)
-    u_dev, p_dev, reset_dev, y_dev, active_dev = inputs
-    per_round = jnp.asarray(_steps_per_round(waiting), jnp.int32)
     return _advance(
-        scene, opts, update, u_dev, p_dev, y, state, reset_dev, y_dev, active_dev, per_round
+        scene,
+        opts,
+        update,
+        slots,
+        inputs,
+        jnp.asarray(n, jnp.int32),
+        jnp.asarray(drain),
+        jnp.asarray(MAX_STEPS_PER_CALL, jnp.int32),
     )
 
 
@@ -445,11 +508,11 @@ class _RoundCompile(threading.Thread):
             key = _round_key(*self.args)
             if _round_has_run(key):
                 return
-            u_pool, p_pool, y_pool = _empty_pool(scene, controls, params, size)
-            y, state = _initial_state(scene, opts, size, dtype, sharding)
-            idle = np.zeros(size, bool)
-            pool = (u_pool, p_pool, y, state, idle, y_pool, idle)
-            out = _round(scene, opts, update, dtype, sharding, *pool, False)
+            slots = _initial_slots(scene, opts, size, controls.shape[1], params, dtype, sharding)
+            empty = (np.zeros(0, int), None, np.zeros((0, scene.n_dofs)))
+            out = _round(
+                scene, opts, update, dtype, sharding, controls, params, slots, empty, size, True
+            )
             jax.block_until_ready(out)
             _round_ran(key)
         except BaseException as error:  # raised again in the pools' threads
