@@ -1,13 +1,13 @@
 """Equilibria for batches of controls: vmapped, pooled, warm-started, sharded across devices.
 
 Rows are solved in a pool of slots (:mod:`pacjax._statics.pool`; ``chunk_size``, at most
-``CPU_POOL_SLOTS`` per CPU device): one compiled, ``vmap``-ed call runs the continuation of
-every slot for a few steps, and a slot whose row has finished is refilled with the next row
-(its scaled starting point computed beforehand, a chunk of rows in one call). A ``vmap``-ed
-loop runs as many steps as its slowest row, so without the refill every chunk would cost its
-slowest row's step count times its size; with it, a long batch costs about the mean. Each row
-follows the iterates of :func:`solve_equilibrium` (the same root finder, resumed round after
-round), so results agree with single solves. The pool has a fixed size, so a batch of any
+``CPU_POOL_SLOTS`` per CPU device): one compiled, ``vmap``-ed loop steps the continuation of
+every slot, and a slot whose row has finished takes the next row on the device, at the next
+step (its scaled starting point computed beforehand, a block of rows in one call). A
+``vmap``-ed loop runs as many steps as its slowest row, so without the refill every chunk would
+cost its slowest row's step count times its size; with it, a long batch costs about the mean.
+Each row follows the iterates of :func:`solve_equilibrium` (the same root finder, resumed call
+after call), so results agree with single solves. The pool has a fixed size, so a batch of any
 length compiles once. On a single CPU device two pools run side by side in threads, since one
 XLA:CPU execution leaves part of the cores idle. With several devices
 (``jax.local_devices()``), the pool is sharded along the batch axis with ``jax.sharding`` and
@@ -116,7 +116,7 @@ def iter_batch(
     starts = _Starts(np.asarray(scene.rest_configuration(dtype)), q0, warm_start, chunk)
     # Starting points a pool's worth at a time: the first pool starts after one such block
     # (a block of the whole chunk held both lanes for about a tenth of a 1,000-row batch), and
-    # each later block is computed while the other lane runs its round. Warm starts keep
+    # each later block is computed while the other lane runs its steps. Warm starts keep
     # blocks of the chunk: a row's start is the nearest row solved before its block.
     block = chunk if warm_start else slots
     pool = pool_solve(
