@@ -217,7 +217,7 @@ def _zero_params(p_shapes, size):
 
 class _StartBlocks:
     """Starting points of the rows, computed a block of rows at a time (one compiled call per
-    block, not one per slot and round): the unscaled ``q`` from ``starts`` and the scaled,
+    block, not one per slot): the unscaled ``q`` from ``starts`` and the scaled,
     aligned ``y`` the continuation starts from. Only the blocks still being handed out are kept.
     """
 
@@ -409,8 +409,8 @@ def _pool_lane(
 
 
 def _round(scene, opts, update, dtype, sharding, controls, params, slots, pending, size, drain):
-    """One :func:`_advance` call: the ``pending`` rows (``(rows, q, y)``, at most ``size``)
-    padded to ``size`` and handed over with their commands and parameters."""
+    """One round of a pool, an :func:`_advance` call: the ``pending`` rows (``(rows, q, y)``,
+    at most ``size``) padded to ``size`` and handed over with their commands and parameters."""
     rows, _, y = pending
     n = len(rows)
     take = np.concatenate([rows, np.zeros(size - n, int)]) if n else np.zeros(size, int)
