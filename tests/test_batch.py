@@ -31,6 +31,32 @@ def test_batch_matches_single_solves(scene):
         np.testing.assert_allclose(batch.q[i], single.q, atol=1e-9)
 
 
+def test_slots_take_rows_as_others_finish_as_single_solves_would(scene, monkeypatch):
+    # 12 rows through two pools of 2 slots: a slot takes the next row inside a call as soon as
+    # its row is done, and calls cut short by their step cap (2 here) leave their pending rows
+    # to the next call. Every row still takes its single solve's iterates.
+    from pacjax._statics import pool
+
+    calls = []
+    round_ = pool._round
+
+    def spy(*args):
+        out = round_(*args)
+        calls.append((len(args[8][0]), int(out[1])))  # rows pending, rows started
+        return out
+
+    monkeypatch.setattr(pool, "MAX_STEPS_PER_CALL", 2)
+    monkeypatch.setattr(pool, "_round", spy)
+    commands = np.random.default_rng(7).uniform(0.0, 0.012, (12, 3))
+    batch = pj.solve_batch(scene, commands, chunk_size=3)
+    assert np.all(batch.converged)
+    assert any(started < pending for pending, started in calls)
+    for i, u in enumerate(commands):
+        single = pj.solve_equilibrium(scene, u)
+        np.testing.assert_allclose(batch.q[i], single.q, atol=1e-9)
+        assert batch.steps[i] == single.steps
+
+
 def test_batch_over_payloads(scene):
     masses = np.array([0.0, 0.1, 0.3])
     commands = np.zeros((3, 3))
