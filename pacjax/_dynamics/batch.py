@@ -169,9 +169,7 @@ def _rows_side_by_side(scene, damping, schedule, batched, span, ts, dt0, opts, r
 
     def run(i):
         row = jtu.tree_map(lambda x: x[i], batched)
-        u, q, v = row if schedule is None else (schedule, *row)
-        q = aligned_rest_start(scene, u, q, v, span[0])
-        return integrate(scene, damping, u, q, v, span, ts, dt0, opts)
+        return _one_row(scene, damping, schedule, row, span, ts, dt0, opts)
 
     first = run(0)  # compiles the programs (or finds them) before the threads share them
     with ThreadPoolExecutor(max_workers=min(CPU_LANES, rows)) as lanes:
@@ -189,12 +187,17 @@ def _rows_at_once(rows_at_once: int | None, rows: int) -> int:
     return min(int(rows_at_once), rows)
 
 
+def _one_row(scene, damping, schedule, row, span, ts, dt0, opts):
+    """One row as :func:`simulate` runs it: the start's alignment, then :func:`integrate`."""
+    u, q, v = row if schedule is None else (schedule, *row)
+    q = aligned_rest_start(scene, u, q, v, span[0])
+    return integrate(scene, damping, u, q, v, span, ts, dt0, opts)
+
+
 @eqx.filter_jit
 def _simulate_rows(scene, damping, schedule, batched, span, ts, dt0, opts, group):
     def one(row):
-        u, q, v = row if schedule is None else (schedule, *row)
-        q = aligned_rest_start(scene, u, q, v, span[0])
-        return integrate(scene, damping, u, q, v, span, ts, dt0, opts)
+        return _one_row(scene, damping, schedule, row, span, ts, dt0, opts)
 
     if group >= jtu.tree_leaves(batched)[0].shape[0]:
         return jax.vmap(one)(batched)
