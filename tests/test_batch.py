@@ -34,7 +34,9 @@ def test_batch_matches_single_solves(scene):
 def test_slots_take_rows_as_others_finish_as_single_solves_would(scene, monkeypatch):
     # 12 rows through two pools of 2 slots: a slot takes the next row inside a call as soon as
     # its row is done, and calls cut short by their step cap (2 here) leave their pending rows
-    # to the next call. Every row still takes its single solve's iterates.
+    # to the next call. Every row still takes its single solve's iterates, and ends one
+    # linearisation sooner where its next step lands within the tolerance (the pool tries each
+    # next step ahead; a single solve linearises there to find it converged).
     from pacjax._statics import pool
 
     calls = []
@@ -54,7 +56,9 @@ def test_slots_take_rows_as_others_finish_as_single_solves_would(scene, monkeypa
     for i, u in enumerate(commands):
         single = pj.solve_equilibrium(scene, u)
         np.testing.assert_allclose(batch.q[i], single.q, atol=1e-9)
-        assert batch.steps[i] == single.steps
+        assert int(single.steps) - 1 <= int(batch.steps[i]) <= int(single.steps)
+    ends = [pj.solve_equilibrium(scene, u).steps for u in commands]
+    assert np.any(np.asarray(batch.steps) < np.asarray(ends))
 
 
 def test_batch_over_payloads(scene):
@@ -94,7 +98,8 @@ def test_pool_refills_slots_and_yields_chunks_in_order(scene):
         for i, u in zip(range(rows.start, rows.stop), commands[rows], strict=True):
             single = pj.solve_equilibrium(scene, u)
             np.testing.assert_allclose(eq.q[i - rows.start], single.q, atol=1e-9)
-            assert int(eq.steps[i - rows.start]) == int(single.steps)
+            # (one linearisation fewer where the step tried ahead ends the row)
+            assert int(single.steps) - 1 <= int(eq.steps[i - rows.start]) <= int(single.steps)
 
 
 def test_pools_side_by_side_agree_with_one_pool_and_stop_cleanly(scene, monkeypatch):

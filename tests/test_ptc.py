@@ -80,6 +80,43 @@ def test_a_follower_loaded_solve_leaves_the_saddle_of_a_straight_segments_plane_
     np.testing.assert_array_less(0.0, np.cos(np.asarray(eq.q)[2::4]))
 
 
+def _quadratic_solve(stiffness, load, ahead):
+    """The continuation on the energy ``y K y / 2 - b y`` from zero, Newton from the start."""
+
+    def fn(y, args):
+        r = stiffness @ y - load
+        return r, (0.5 * y @ (stiffness @ y) - load @ y, jnp.ones_like(y))
+
+    solver = PseudoTransientContinuation(
+        rtol=0.0, atol=1e-12, symmetric=True, newton_start=True, ahead=ahead
+    )
+    y0 = jnp.zeros(load.shape[0], jnp.float64)
+    return optx.root_find(fn, solver, y0, has_aux=True, max_steps=50, throw=False)
+
+
+def test_a_solve_ends_where_the_step_tried_ahead_lands_within_the_tolerance():
+    # A quadratic energy: the Newton step from the start lands on the solution. With ``ahead``
+    # the step tried after the first linearisation finds the residual there within the
+    # tolerance, and the solve ends with that one linearisation, at the solution; without it
+    # the solve linearises there too (two steps).
+    rng = np.random.default_rng(1)
+    m = rng.normal(size=(5, 5))
+    stiffness = jnp.asarray(m @ m.T + 5.0 * np.eye(5))
+    load = jnp.asarray(rng.normal(size=5))
+    for ahead, steps in ((True, 1), (False, 2)):
+        sol = _quadratic_solve(stiffness, load, ahead)
+        assert sol.result == optx.RESULTS.successful
+        assert int(sol.stats["num_steps"]) == steps, (ahead, int(sol.stats["num_steps"]))
+        np.testing.assert_allclose(sol.value, np.linalg.solve(stiffness, load), rtol=1e-12)
+    # Too soft a stiffness for its stability to carry over the step: the solve takes the step
+    # and linearises at the solution.
+    soft = stiffness - (np.linalg.eigvalsh(stiffness)[0] - 1e-2) * jnp.eye(5)
+    sol = _quadratic_solve(soft, load, True)
+    assert sol.result == optx.RESULTS.successful
+    assert int(sol.stats["num_steps"]) == 2, int(sol.stats["num_steps"])
+    assert np.abs(np.asarray(soft @ sol.value - load)).max() <= 1e-12
+
+
 def test_follower_force_residual_is_the_same_under_jit():
     # The follower force's site is known (the solver makes it a Python float first): under jit
     # its frames must come from the same knot path as outside it. Stacked into a tracer, the

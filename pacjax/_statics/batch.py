@@ -7,9 +7,12 @@ step (its scaled starting point computed beforehand, a block of rows in one call
 ``vmap``-ed loop runs as many steps as its slowest row, so without the refill every chunk would
 cost its slowest row's step count times its size; with it, a long batch costs about the mean.
 Each row follows the iterates of :func:`solve_equilibrium` (the same root finder, resumed call
-after call), so results agree with single solves. The pool has a fixed size, so a batch of any
-length compiles once. On a single CPU device two pools run side by side in threads, since one
-XLA:CPU execution leaves part of the cores idle. With several devices
+after call), so results agree with single solves within the tolerance: the pool's root finder
+also tries each next step ahead with one residual evaluation and ends a row where that step
+lands within the tolerance, one linearisation sooner than a single solve, which keeps a
+linearisation at its result for its derivatives (a batch takes none). The pool has a fixed
+size, so a batch of any length compiles once. On a single CPU device two pools run side by side
+in threads, since one XLA:CPU execution leaves part of the cores idle. With several devices
 (``jax.local_devices()``), the pool is sharded along the batch axis with ``jax.sharding`` and
 XLA runs the shards in parallel. In a multi-host run (``jax.distributed.initialize()``) each
 process passes the rows it owns and shards them over its own devices; see docs/multihost.md.

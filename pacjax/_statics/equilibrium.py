@@ -76,9 +76,13 @@ def _stability_tol(opts, dtype):
     )
 
 
-def make_solver(scene: Scene, opts: SolverOptions, dtype) -> PseudoTransientContinuation:
+def make_solver(
+    scene: Scene, opts: SolverOptions, dtype, ahead: bool = False
+) -> PseudoTransientContinuation:
     """The continuation root finder for a scene's structure and the solver options (their
-    tolerance resolved: :func:`solve_core_linearised` and :func:`pacjax.solve_batch` do it)."""
+    tolerance resolved: :func:`solve_core_linearised` and :func:`pacjax.solve_batch` do it).
+    ``ahead``: each step tries the next one ahead (the batch's pool; see
+    :class:`pacjax._statics.ptc.PseudoTransientContinuation`)."""
     return PseudoTransientContinuation(
         rtol=0.0,
         atol=opts.tol,
@@ -91,6 +95,7 @@ def make_solver(scene: Scene, opts: SolverOptions, dtype) -> PseudoTransientCont
         frozen_work=not scene.is_conservative,
         structured=opts.hessian == "structured",
         newton_start=scene.model.newton_from_start(),
+        ahead=ahead,
     )
 
 
@@ -109,11 +114,13 @@ def start_point(problem: "ScaledProblem", q0, opts: SolverOptions):
 def equilibrium_from(
     scene: Scene, problem: "ScaledProblem", solver, y, state, steps, tol: float
 ) -> Equilibrium:
-    """The :class:`Equilibrium` at the continuation's final iterate ``y`` and state."""
-    residual_norm = max_abs(state.residual)
+    """The :class:`Equilibrium` at the continuation's final iterate ``y`` and state (or at the
+    step tried ahead of it, where that ended the solve: ``solver.finish``)."""
+    y, residual, merit = solver.finish(y, state)
+    residual_norm = max_abs(residual)
     converged = residual_norm <= tol
     stable = state.eig > -solver.stability_tol
-    energy = state.merit if scene.is_conservative else jnp.asarray(jnp.nan, state.merit.dtype)
+    energy = merit if scene.is_conservative else jnp.asarray(jnp.nan, merit.dtype)
     # A stationary point that is not a minimum is not a success: a user who reads only the
     # result must not take a physically impossible shape.
     code = jnp.where(converged & ~stable, CONVERGED_SADDLE, final_code(state, converged))

@@ -58,7 +58,8 @@ def _advance(scene, opts, update, slots, pending, n_pending, drain, max_steps):
     host's work between calls is paid once per pool's worth of rows.
 
     The steps are those of :func:`pacjax._statics.equilibrium.solve_core` (the same root finder,
-    resumed call after call), so a row's iterates do not depend on which rows share the pool.
+    resumed call after call, with each next step tried ahead: ``make_solver``'s ``ahead``), so a
+    row's iterates do not depend on which rows share the pool.
     Returns the new ``slots``, the number of pending rows started, whether each local row
     (the ``size`` slots' rows at entry, then the pending ones) finished, and their
     :class:`Equilibrium` (valid where finished).
@@ -77,10 +78,10 @@ def _advance(scene, opts, update, slots, pending, n_pending, drain, max_steps):
             return (
                 scene,
                 eqx.tree_at(lambda pr: pr.controls, shared, u),
-                make_solver(scene, opts, dtype),
+                make_solver(scene, opts, dtype, ahead=True),
             )
         sc = update(scene, p)
-        return sc, ScaledProblem.build(sc, u), make_solver(sc, opts, dtype)
+        return sc, ScaledProblem.build(sc, u), make_solver(sc, opts, dtype, ahead=True)
 
     def running(solver, problem, y, st):
         # As optimistix.root_find: stop when the solver terminates, y is not finite or the
@@ -178,7 +179,7 @@ def _initial_slots(scene, opts, size, n_controls, params, dtype, sharding):
     """Placeholder slots of a pool of ``size`` (:func:`_advance`'s ``slots``), every slot free:
     zeros of the commands', parameters' and solver state's shapes. Their values are never read:
     a slot runs only after :func:`_advance` has handed it a row."""
-    solver = make_solver(scene, opts, dtype)
+    solver = make_solver(scene, opts, dtype, ahead=True)
     p_shapes = _param_shapes(params)
     zeros = _placeholder(solver, scene.n_dofs, n_controls, p_shapes, np.dtype(dtype), size)
     free = np.full(size, -1, np.int32)

@@ -14,6 +14,11 @@ bounded number of times, and the continuation then goes on until the stiffness i
 residual below the tolerance next to the saddle is not convergence; for a non-conservative problem
 only on the step after the escape, since the flow may lead back to the same point).
 
+With ``ahead`` (the batch's pool, where throughput is the point) a conservative solve also tries
+each next step ahead, with the residual at its end and no Jacobian; a solve whose next step lands
+within the tolerance ends there, one linearisation sooner, as a Newton solver that stops on the
+size of its step does.
+
 Written as an ``optimistix.AbstractRootFinder`` so that ``optimistix.root_find`` runs the loop; its
 state's last Jacobian gives the equilibrium's derivatives (:mod:`pacjax._statics.implicit`).
 """
@@ -48,6 +53,11 @@ _DT_GROWTH = (2.0, 100.0)
 # attractor of the flow (a dead moment bending a twistable rod past ~2 rad), which Newton's
 # steps then reach again.
 _LEAVING_STEPS = 16
+# A converged point reached by the step tried ahead takes its stability from the linearisation
+# it was stepped from: only where that stiffness's lowest eigenvalue exceeds the step's size
+# times this (the scaled Hessian moves by about its derivative times the step, O(1) in scaled
+# coordinates; a generous factor, since the next full step is always there to fall back on).
+_AHEAD_EIG_MARGIN = 10.0
 
 
 class PTCState(eqx.Module):
@@ -72,6 +82,13 @@ class PTCState(eqx.Module):
     # step (``frozen_work``).
     drive: Float[Array, " n"]
     code: Int[Array, ""]
+    # With ``ahead``: the next step tried from ``y`` along this state's linearisation, its end
+    # point, residual and merit, and the step's size. Where that residual is converged the
+    # solve ends there without a linearisation of its own (``finish``).
+    ahead_y: Float[Array, " n"]
+    ahead_residual: Float[Array, " n"]
+    ahead_merit: Float[Array, ""]
+    ahead_size: Float[Array, ""]
 
 
 def _moved(args, y, dy):
@@ -114,7 +131,10 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
 
     One :meth:`step` is a descent direction from the linearisation at ``y`` (:meth:`_descent`),
     a search along it on the merit (:meth:`_search`), the linearisation at the point reached
-    (:meth:`_linearise`) and the control of the pseudo-time step (:meth:`_control`).
+    (:meth:`_linearise`) and the control of the pseudo-time step (:meth:`_control`). With
+    ``ahead``, a conservative solve then tries the next full step (:meth:`_ahead`): where the
+    residual at its end is within the tolerance the solve ends there (:meth:`finish`), and
+    otherwise the next search starts from that trial's merit.
     """
 
     rtol: float
@@ -142,6 +162,11 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
     # coordinates in which Newton's method converges from the straight start (not the polar
     # ones of PCC/PAC: StrainModel.newton_from_start).
     newton_start: bool = False
+    # When True (a conservative problem), each step tries the next one ahead with a residual
+    # evaluation (see the module docstring). A solve's programs grow by that evaluation and its
+    # result has no linearisation of its own where the step ended it, so only the batch's pool,
+    # which neither differentiates nor compiles per call, sets it.
+    ahead: bool = False
 
     @property
     def _frozen(self) -> bool:
@@ -168,10 +193,43 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
             escape_dy=jnp.zeros(n, dtype),
             drive=jnp.zeros(n, dtype),
             code=jnp.asarray(SUCCESSFUL),
+            ahead_y=y,
+            ahead_residual=jnp.full(f_struct.shape, jnp.inf, dtype),
+            ahead_merit=jnp.asarray(jnp.inf, dtype),
+            ahead_size=jnp.asarray(jnp.inf, dtype),
         )
 
     def _converged(self, r) -> Bool[Array, ""]:
         return max_abs(r) <= self.atol
+
+    @property
+    def _tries_ahead(self) -> bool:
+        return self.ahead and self.symmetric
+
+    def _ahead_done(self, state: PTCState) -> Bool[Array, ""]:
+        """Whether the step tried ahead ends the solve: its residual is converged, and the
+        stiffness it was stepped from is stable by a margin larger than the step moves it."""
+        if not self._tries_ahead:
+            return jnp.asarray(False)
+        margin = self.stability_tol + _AHEAD_EIG_MARGIN * state.ahead_size
+        return (
+            self._converged(state.ahead_residual)
+            & (state.eig > margin)
+            & ~state.escaping
+            & (state.code == SUCCESSFUL)
+        )
+
+    def finish(self, y, state: PTCState):
+        """``(y, residual, merit)`` of the solve's result: the point reached by the step tried
+        ahead where that ended the solve (:meth:`_ahead_done`), else ``y`` and its own."""
+        if not self._tries_ahead:
+            return y, state.residual, state.merit
+        done = self._ahead_done(state)
+        return (
+            jnp.where(done, state.ahead_y, y),
+            jnp.where(done, state.ahead_residual, state.residual),
+            jnp.where(done, state.ahead_merit, state.merit),
+        )
 
     def _wants_escape(self, state: PTCState) -> Bool[Array, ""]:
         return (
@@ -205,7 +263,26 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
         )
         accept = first | (accept & finite)
         new_state = self._control(state, new, alpha, ok, tiny_dt, accept, finite, first, escape)
-        return jnp.where(accept, new.y, y), new_state, (new_state.merit, new_state.weights)
+        y_next = jnp.where(accept, new.y, y)
+        if self._tries_ahead:
+            new_state = self._ahead(fn, y_next, args, new_state)
+        return y_next, new_state, (new_state.merit, new_state.weights)
+
+    def _ahead(self, fn, y, args, state: PTCState) -> PTCState:
+        """``state`` with the next continuation step from ``y`` tried ahead: its end point,
+        residual and merit (one residual evaluation, no Jacobian). The next :meth:`_search`
+        starts from that merit, and :meth:`terminate` ends the solve there where the residual
+        is converged."""
+        delta = saddle_free_step(
+            state.eigvals, state.eigvecs, state.weights, state.residual, state.dt
+        )
+        y_ahead = _moved(args, y, delta)
+        r, (merit, _) = fn(y_ahead, args)
+        return eqx.tree_at(
+            lambda s: (s.ahead_y, s.ahead_residual, s.ahead_merit, s.ahead_size),
+            state,
+            (y_ahead, r, merit, max_abs(delta)),
+        )
 
     def _descent(self, fn, y, args, state: PTCState, first, escape):
         """The step ``delta`` from ``y`` that the search shortens, and ``took_newton``.
@@ -297,7 +374,12 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
             merit = merit_only(_moved(args, y, alpha * delta))
             return alpha, merit, descends(merit) | first | escape
 
-        m_full = merit_only(_moved(args, y, delta))
+        if self._tries_ahead:
+            # Tried at the end of the last step, along this very step (the first step and an
+            # escape are taken whatever the merit says).
+            m_full = state.ahead_merit
+        else:
+            m_full = merit_only(_moved(args, y, delta))
         ok_full = descends(m_full) | rounding | first | escape
         if not self.symmetric:
             # A Newton step that halved the residual is taken whatever the merit says: near a
@@ -419,6 +501,11 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
             escape_dy=escape_dy,
             drive=keep(new.drive, state.drive),
             code=code,
+            # (tried again from the new point by ``step``)
+            ahead_y=state.ahead_y,
+            ahead_residual=state.ahead_residual,
+            ahead_merit=state.ahead_merit,
+            ahead_size=state.ahead_size,
         )
 
     def _next_dt(self, state: PTCState, r_new, alpha, accept, first, escape, eig):
@@ -456,7 +543,8 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
         # left by 0.05 has a residual ~1.5e-5). It must first reach a stable point: the
         # saddle-free steps move it away from the saddle geometrically, and the energy, which
         # the escape lowered below the saddle's, cannot bring it back.
-        done = self._converged(state.residual) & ~self._wants_escape(state) & ~state.escaping
+        converged = self._converged(state.residual) | self._ahead_done(state)
+        done = converged & ~self._wants_escape(state) & ~state.escaping
         failed = state.code != SUCCESSFUL
         result = optx.RESULTS.where(
             failed, optx.RESULTS.nonlinear_divergence, optx.RESULTS.successful
@@ -464,8 +552,8 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
         return done | failed, result
 
     def postprocess(self, fn, y, aux, args, options, state, tags, result):
-        del fn, args, options, state, tags, result
-        return y, aux, {}
+        del fn, args, options, tags, result
+        return self.finish(y, state)[0], aux, {}
 
 
 def final_code(state: PTCState, converged) -> Int[Array, ""]:

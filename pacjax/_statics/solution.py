@@ -21,7 +21,9 @@ class Equilibrium(eqx.Module):
         min_hessian_eigenvalue: that smallest eigenvalue of ``D^-1/2 dF/dq D^-1/2`` (for a
             conservative scene, the Hessian of ``V``), relative to the elastic stiffness (1 means
             as stiff as the body alone).
-        steps: continuation steps plus Newton polish steps.
+        steps: continuation steps plus Newton polish steps, one linearisation each (the first
+            at the start). A row of :func:`pacjax.solve_batch` whose last step lands within the
+            tolerance ends there with a residual evaluation, not a step of its own.
         result: how the solve ended, a :class:`pacjax.RESULTS` item (see :attr:`reason`):
             ``successful`` exactly when ``converged`` and ``stable``; ``converged_saddle`` for
             a converged unstable equilibrium (read ``converged`` for any stationary point).
