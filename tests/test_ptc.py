@@ -231,8 +231,9 @@ def test_pac_tentacle_takes_newtons_steps_from_a_long_first_step():
     for result in (eq, short):
         assert np.all(np.asarray(result.converged)) and np.all(np.asarray(result.stable))
     np.testing.assert_allclose(np.asarray(eq.q), np.asarray(short.q), atol=1e-8)
-    assert int(np.max(eq.steps)) <= 6, np.asarray(eq.steps)
-    assert int(np.min(short.steps)) >= 7, np.asarray(short.steps)
+    # (the batch's rows end where the step tried ahead lands: one step fewer than single solves)
+    assert int(np.max(eq.steps)) <= 5, np.asarray(eq.steps)
+    assert int(np.min(short.steps)) >= 6, np.asarray(short.steps)
 
 
 def test_a_segment_straight_to_round_off_keeps_newtons_steps():

@@ -264,11 +264,12 @@ def segment_knot_frames(
     nodes = jnp.asarray(nodes, dtype)
     n_int = a.shape[0]
     s_nodes = a[:, None] + h[:, None] * nodes[None, :]
-    closed = model.plane_frames(q, jnp.concatenate([knots, s_nodes.reshape(-1)]))
+    closed = model.plane_frames(q, knots)
     if closed is not None:
-        # One bending plane: closed-form frames, no Magnus steps and no chained products.
-        k = knots.shape[0]
-        rots, tangents = closed[0][:k], closed[1][k:].reshape(s_nodes.shape + (3,))
+        # One bending plane: closed-form frames, no Magnus steps and no chained products. The
+        # nodes need their tangents only (their rotations, unused, are left out of the program).
+        rots = closed[0]
+        tangents = model.plane_frames(q, s_nodes.reshape(-1))[1].reshape(s_nodes.shape + (3,))
         return _knot_positions(model, q, length, h, weights, rots, tangents, node_weights)
     # Magnus vectors of every interval and of [a, node] for every position node, in one vmap.
     starts = jnp.concatenate([a, jnp.repeat(a, len(nodes))])

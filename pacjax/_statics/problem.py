@@ -133,6 +133,17 @@ class ScaledProblem(eqx.Module):
         jac = self.row[:, None] * hessian * self.sigma[None, :]
         return jac, (grad * self.row, (merit, self.weights()))
 
+    def polar_model(self, r) -> Bool[Array, ""]:
+        """Whether the Jacobian that :meth:`linearise` gives where the scaled residual is ``r``
+        is the Hessian of the energy in the coordinates themselves, not along :meth:`moved`'s
+        moves: always where there are no moves, else near a solution of a conservative scene
+        (``_MOVE_CURVATURE_RESIDUAL``). There its Newton step is ``y + dy``."""
+        if self.scene.model.free_plane_angle() is None:
+            return jnp.asarray(True)
+        if not self.scene.is_conservative:
+            return jnp.asarray(False)
+        return jnp.max(jnp.abs(r)) <= _MOVE_CURVATURE_RESIDUAL
+
     def moved(self, y, dy):
         """The iterate after the continuation step ``dy`` from ``y``: ``y + dy``, except for the
         bending of a PCC/PAC segment whose plane angle ``phi`` is free (torsion-free frame) and

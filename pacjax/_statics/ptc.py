@@ -89,6 +89,8 @@ class PTCState(eqx.Module):
     ahead_residual: Float[Array, " n"]
     ahead_merit: Float[Array, ""]
     ahead_size: Float[Array, ""]
+    # Whether that point is the plain sum ``y + delta`` (see ``_plain_near``).
+    ahead_plain: Bool[Array, ""]
 
 
 def _moved(args, y, dy):
@@ -197,6 +199,7 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
             ahead_residual=jnp.full(f_struct.shape, jnp.inf, dtype),
             ahead_merit=jnp.asarray(jnp.inf, dtype),
             ahead_size=jnp.asarray(jnp.inf, dtype),
+            ahead_plain=jnp.asarray(False),
         )
 
     def _converged(self, r) -> Bool[Array, ""]:
@@ -215,9 +218,31 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
         return (
             self._converged(state.ahead_residual)
             & (state.eig > margin)
+            & state.ahead_plain
             & ~state.escaping
             & (state.code == SUCCESSFUL)
         )
+
+    def _plain_near(self, args, state: PTCState) -> Bool[Array, ""]:
+        """With ``ahead``: whether the steps from ``state``'s linearisation are plain sums
+        ``y + dy``, not ``args.moved``'s moves of PCC/PAC bending vectors. So near a solution,
+        where the problem's Jacobian is the polar Hessian (``args.polar_model``), whose Newton
+        step the sum is: the step tried ahead is then the search's full step, and a point whose
+        bits do not depend on the row's place in a vectorised pool (the moves' arithmetic did,
+        at the last bit: rows of a batch differed from run to run where its two pools took
+        them in another order)."""
+        if not hasattr(args, "moved"):
+            return jnp.asarray(True)
+        if not hasattr(args, "polar_model"):
+            return jnp.asarray(False)
+        return args.polar_model(state.residual)
+
+    def _to(self, args, y, dy, plain):
+        """The iterate after the step ``dy`` from ``y``: ``y + dy`` where ``plain``, else
+        :func:`_moved`'s."""
+        if not self._tries_ahead:
+            return _moved(args, y, dy)
+        return jnp.where(plain, y + dy, _moved(args, y, dy))
 
     def finish(self, y, state: PTCState):
         """``(y, residual, merit)`` of the solve's result: the point reached by the step tried
@@ -255,7 +280,9 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
         tiny_dt = state.dt <= _MIN_DT
         accept = ok | tiny_dt
         alpha = jnp.where(ok, alpha, _MIN_ALPHA)
-        new = self._linearise(fn, _moved(args, y, alpha * delta), args, state)
+        # (an escape from a saddle moves as it always has)
+        plain = self._plain_near(args, state) & ~escape if self._tries_ahead else None
+        new = self._linearise(fn, self._to(args, y, alpha * delta, plain), args, state)
         finite = (
             jnp.all(jnp.isfinite(new.residual))
             & jnp.isfinite(new.merit)
@@ -270,18 +297,22 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
 
     def _ahead(self, fn, y, args, state: PTCState) -> PTCState:
         """``state`` with the next continuation step from ``y`` tried ahead: its end point,
-        residual and merit (one residual evaluation, no Jacobian). The next :meth:`_search`
-        starts from that merit, and :meth:`terminate` ends the solve there where the residual
-        is converged."""
+        residual and merit (one residual evaluation, no Jacobian). :meth:`terminate` ends the
+        solve there where the residual is converged, and the next :meth:`_search` starts from
+        that merit.
+
+        The point is the search's full step (:meth:`_to`); the solve ends there only where it
+        is a plain sum (:meth:`_plain_near`)."""
         delta = saddle_free_step(
             state.eigvals, state.eigvecs, state.weights, state.residual, state.dt
         )
-        y_ahead = _moved(args, y, delta)
+        plain = self._plain_near(args, state)
+        y_ahead = self._to(args, y, delta, plain)
         r, (merit, _) = fn(y_ahead, args)
         return eqx.tree_at(
-            lambda s: (s.ahead_y, s.ahead_residual, s.ahead_merit, s.ahead_size),
+            lambda s: (s.ahead_y, s.ahead_residual, s.ahead_merit, s.ahead_size, s.ahead_plain),
             state,
-            (y_ahead, r, merit, max_abs(delta)),
+            (y_ahead, r, merit, max_abs(delta), plain),
         )
 
     def _descent(self, fn, y, args, state: PTCState, first, escape):
@@ -363,6 +394,7 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
         # the merit alone (the residual comes with the Jacobian at the accepted point).
         merit_only = self._merit_only(fn, y, args, state)
         slope, rounding = self._slope(y, state, delta, eps)
+        plain = self._plain_near(args, state) & ~escape if self._tries_ahead else None
 
         def search_cond(carry):
             alpha, _, ok = carry
@@ -371,11 +403,11 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
         def search_body(carry):
             alpha, merit, _ = carry
             alpha = _shorter(alpha, merit, state.merit, slope)
-            merit = merit_only(_moved(args, y, alpha * delta))
+            merit = merit_only(self._to(args, y, alpha * delta, plain))
             return alpha, merit, descends(merit) | first | escape
 
         if self._tries_ahead:
-            # Tried at the end of the last step, along this very step (the first step and an
+            # Tried at the end of the last step, at this very point (the first step and an
             # escape are taken whatever the merit says).
             m_full = state.ahead_merit
         else:
@@ -506,6 +538,7 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
             ahead_residual=state.ahead_residual,
             ahead_merit=state.ahead_merit,
             ahead_size=state.ahead_size,
+            ahead_plain=state.ahead_plain,
         )
 
     def _next_dt(self, state: PTCState, r_new, alpha, accept, first, escape, eig):
