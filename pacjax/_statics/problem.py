@@ -120,8 +120,8 @@ class ScaledProblem(eqx.Module):
         if self.scene.is_conservative:
             # Near a solution Newton's steps converge with either model, and the solver's
             # last Jacobian is the energy's (for the derivatives and the stability check).
-            far = jnp.max(jnp.abs(grad * self.row)) > _MOVE_CURVATURE_RESIDUAL
-            hessian = hessian + jnp.where(far, self.move_curvature(q, grad), 0.0)
+            polar = self.polar_model(grad * self.row)
+            hessian = hessian + jnp.where(polar, 0.0, self.move_curvature(q, grad))
         else:
 
             def forces(x):

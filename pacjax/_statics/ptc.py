@@ -274,14 +274,14 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
         first = state.step == 0
         escape = self._wants_escape(state) & ~first
         delta, took_newton = self._descent(fn, y, args, state, first, escape)
-        alpha, ok = self._search(fn, y, args, state, delta, took_newton, first, escape)
+        # (an escape from a saddle moves as it always has)
+        plain = self._plain_near(args, state) & ~escape if self._tries_ahead else None
+        alpha, ok = self._search(fn, y, args, state, delta, took_newton, first, escape, plain)
         # No acceptable step even at the smallest length: take the shortest flow step when dt
         # is already tiny (it is a descent direction), else shrink dt and stay.
         tiny_dt = state.dt <= _MIN_DT
         accept = ok | tiny_dt
         alpha = jnp.where(ok, alpha, _MIN_ALPHA)
-        # (an escape from a saddle moves as it always has)
-        plain = self._plain_near(args, state) & ~escape if self._tries_ahead else None
         new = self._linearise(fn, self._to(args, y, alpha * delta, plain), args, state)
         finite = (
             jnp.all(jnp.isfinite(new.residual))
@@ -375,14 +375,15 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
         took_newton = took_newton & ~first & ~escape & (state.leaving == 0)
         return jnp.where(took_newton, full, flow), took_newton
 
-    def _search(self, fn, y, args, state: PTCState, delta, took_newton, first, escape):
+    def _search(self, fn, y, args, state: PTCState, delta, took_newton, first, escape, plain):
         """The length ``alpha`` of the step along ``delta``, and ``ok``: whether it is acceptable.
 
         Trials ``alpha = 1`` and then ever shorter (:func:`_shorter`) until the merit
         (:meth:`_merit_only`) does not rise above ``state.merit`` beyond its rounding, down to
         ``_MIN_ALPHA``. The full step is acceptable unchecked on the first step and an escape,
         and when its predicted decrease is within rounding (:meth:`_slope`) or, for a
-        non-conservative scene, when it is a Newton step that halved the residual.
+        non-conservative scene, when it is a Newton step that halved the residual. ``plain``
+        (with ``ahead``): whether the trial points are plain sums (:meth:`_to`).
         """
         eps = jnp.finfo(y.dtype).eps
 
@@ -394,7 +395,6 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
         # the merit alone (the residual comes with the Jacobian at the accepted point).
         merit_only = self._merit_only(fn, y, args, state)
         slope, rounding = self._slope(y, state, delta, eps)
-        plain = self._plain_near(args, state) & ~escape if self._tries_ahead else None
 
         def search_cond(carry):
             alpha, _, ok = carry
