@@ -139,6 +139,40 @@ def test_slack_tendon_cannot_push():
     assert jnp.max(jnp.abs(taut - still)) > 0
 
 
+def test_forces_are_the_passive_potential_and_the_motor_law():
+    """``forces`` takes the tendons' pull as one gradient of the potential with the statics'
+    springs pulling as the motors do: it equals the passive potential's gradient plus the motor
+    law written out (:meth:`EquationsOfMotion.tendon_forces`), a tendon taut and stretching,
+    one slack, one in tension mode, the commands moving."""
+    tendons = (
+        *SCENE.tendons,
+        pj.Tendon(0, math.pi / 2, 0.01, mode="tension"),
+    )
+    scene = pj.Scene(SCENE.robot, SCENE.models, tendons=tendons, loads=SCENE.loads)
+    model = EquationsOfMotion.build(scene, pj.Damping(stiffness=0.05), 1e-6, Q.dtype)
+    controls = jnp.array([0.08, -0.01, 0.5])
+    rates = jnp.array([0.03, -0.02, 0.0])
+    zero_mass = jnp.zeros((scene.n_dofs, scene.n_dofs))
+
+    def both(m, q, qdot):
+        fused = m.forces(q, qdot, controls, rates, zero_mass)
+        written = (
+            -jax.grad(m.passive.potential_energy)(q, controls)
+            + m.tendon_forces(q, qdot, controls, rates)
+            - m.damping.stiffness * m.material_damping(q, qdot)
+        )
+        return fused, written
+
+    fused, written = eqx.filter_jit(both)(model, Q, QDOT)
+    np.testing.assert_allclose(
+        fused, written, rtol=1e-12, atol=1e-12 * float(jnp.max(jnp.abs(written)))
+    )
+    tensions = model._motor_law(
+        scene.tendon_lengths(Q), jax.jvp(scene.tendon_lengths, (Q,), (QDOT,))[1], controls, rates
+    )[0]
+    assert tensions[0] > 0 and tensions[1] == 0 and tensions[2] == 0.5
+
+
 @pytest.mark.parametrize("frame", ["torsion_free", "paper"])
 def test_material_damping_is_kelvin_voigt(frame):
     """``D(q) = beta J(q)^T K_s J(q)``: ``beta K_0`` at rest, and a bent PCC segment's

@@ -31,7 +31,10 @@ def test_rows_equal_their_own_simulations():
     assert len(set(np.asarray(batch.num_steps).tolist())) > 1
     # As one vectorised group (an accelerator's default), each row still takes its own steps.
     group = pj.simulate_batch(SCENE, (0.0, 0.02), COMMANDS, q0, rows_at_once=3, **kwargs)
-    np.testing.assert_allclose(group.q, batch.q, rtol=0, atol=1e-12)
+    # A vectorised program rounds differently from a row's (XLA lays out batched products its
+    # own way): the same steps, states within a few 1e-10 of each other over 150-180 steps,
+    # far inside the solver's own error at rtol 1e-6.
+    np.testing.assert_allclose(group.q, batch.q, rtol=1e-8, atol=1e-12)
     np.testing.assert_array_equal(group.num_steps, batch.num_steps)
 
 
