@@ -114,8 +114,8 @@ class EquationsOfMotion(eqx.Module):
         The motors pull as the statics' tendon springs do under :meth:`_spring_controls`, so
         ``-G - K + A f_act`` is minus one gradient of the scene's potential energy, tendons
         included, at those controls: one reverse pass through the kinematics instead of two
-        (the passive potential's and the tendon lengths' transpose), 59 against 80 us on the
-        paper's robot with PAC. :meth:`tendon_forces` is the motor law written out."""
+        (the passive potential's and the tendon lengths' transpose), after one forward
+        derivative for the tendon rates. :meth:`tendon_forces` is the motor law written out."""
         springs = u
         if self.scene.tendons:
             rates = jax.jvp(self.scene.tendon_lengths, (q,), (qdot,))[1]
