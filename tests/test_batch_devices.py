@@ -134,7 +134,7 @@ print(json.dumps({
 def test_simulate_batch_on_two_cpu_devices_runs_rows_side_by_side():
     """On a CPU, host devices share the cores: by default the rows run as on one device, each
     with ``simulate``'s solver and steps, not as one vectorised group over both devices (whose
-    rows would all step with the stiff Jacobian and the slowest row's steps)."""
+    rows would make their Jacobians together and run the slowest row's steps)."""
     out = _on_two_cpu_devices(SIMULATE, timeout=600)
     assert out["batch_steps"] == out["single_steps"]
     assert out["gap"] == 0.0

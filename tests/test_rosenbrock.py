@@ -155,6 +155,34 @@ def test_held_jacobian_serves_several_steps():
         Rosenbrock23(jacobian="finite")
 
 
+def test_rows_under_vmap_make_their_held_jacobian_together():
+    """Rows of a ``vmap``-ped solve (three stiffnesses, ``reuse=5``) make one Jacobian, all
+    together, when a row still stepping needs one: a choice by each row's own flag would be a
+    select that makes it every step. Each row still accepts and rejects its own steps and ends
+    where its own solve does, to the tolerance."""
+    made = [0]
+
+    def jacobian(t, y, mu):
+        jax.debug.callback(lambda: made.__setitem__(0, made[0] + 1))
+        x, v = y
+        return jnp.array([[0.0, 1.0], [-2.0 * mu * x * v - 1.0, mu * (1 - x**2)]])
+
+    solver = Rosenbrock23(jacobian=jacobian, reuse=5)
+    mus = jnp.array([5.0, 20.0, 50.0])
+    rows = jax.jit(jax.vmap(lambda mu: _van_der_pol_end(solver, mu, t1=20.0)))(mus)
+    assert bool(jnp.all(rows.result == diffrax.RESULTS.successful))
+    accepted = np.asarray(rows.stats["num_accepted_steps"])
+    steps = np.asarray(rows.stats["num_steps"])
+    # Every loop pass makes at most one (made for all rows); one every 5 accepted steps of the
+    # row that ages fastest, and after its rejections.
+    assert made[0] <= steps.max() / 2
+    assert made[0] >= accepted.max() / 5
+    for i, mu in enumerate(mus):
+        own = _van_der_pol_end(solver, mu, t1=20.0)
+        np.testing.assert_allclose(rows.ys[0][i], own.ys[0], atol=1e-4)
+        assert abs(int(steps[i]) - int(own.stats["num_steps"])) <= 0.2 * steps[i]
+
+
 def test_after_a_jump_the_step_starts_from_the_vector_field_there():
     """A solver state carried from another point (here the end of another solve) with
     ``made_jump=True``, as after a jump in the vector field: the step evaluates the vector field

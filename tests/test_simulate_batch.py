@@ -29,13 +29,14 @@ def test_rows_equal_their_own_simulations():
         assert int(batch.num_steps[i]) == int(single.num_steps)
     # Rows with different commands take their own steps.
     assert len(set(np.asarray(batch.num_steps).tolist())) > 1
-    # As one vectorised group (an accelerator's default), each row still takes its own steps.
+    # As one vectorised group (an accelerator's default) each row accepts and rejects its own
+    # steps; the rows make their held Jacobians together, so a row's steps differ a little from
+    # its own simulation's, and its states agree to the solver's tolerance (rtol 1e-6).
     group = pj.simulate_batch(SCENE, (0.0, 0.02), COMMANDS, q0, rows_at_once=3, **kwargs)
-    # A vectorised program rounds differently from a row's (XLA lays out batched products its
-    # own way): the same steps, states within a few 1e-10 of each other over 150-180 steps,
-    # far inside the solver's own error at rtol 1e-6.
-    np.testing.assert_allclose(group.q, batch.q, rtol=1e-8, atol=1e-12)
-    np.testing.assert_array_equal(group.num_steps, batch.num_steps)
+    assert bool(jnp.all(group.successful))
+    np.testing.assert_allclose(group.q, batch.q, rtol=1e-5, atol=1e-7)
+    steps, own = np.asarray(group.num_steps), np.asarray(batch.num_steps)
+    assert np.all(np.abs(steps - own) <= 0.2 * own), (steps, own)
 
 
 def test_batch_arguments_are_checked_before_compiling():

@@ -66,17 +66,16 @@ def simulate_batch(
             are padded to a multiple of it.
         rows_at_once: rows integrated as one vectorised integration (groups of this many,
             one group after another; over several devices all rows are one group). In a
-            group every row takes as many steps as the one that needs most, and a held
-            Jacobian cannot be skipped (a
-            ``vmap``-ped choice computes both sides), so each group steps with the stiff
-            Jacobian every step; one row at a time keeps :func:`simulate`'s solver and its own
-            steps, and on a single CPU device :data:`pacjax._statics.pool.CPU_LANES` threads
+            group every row accepts and rejects its own steps, the group runs as many as the
+            row that needs most, and the rows make their held Jacobians together (when one
+            needs it), so a row's steps differ slightly from its own simulation's; one row at
+            a time keeps :func:`simulate`'s solver and its own steps, and on a single CPU
+            device :data:`pacjax._statics.pool.CPU_LANES` threads
             run the one compiled row side by side, each taking the next row when it finishes
             one. Default: one on a CPU, where vectorising small rows costs more per row than
             running them one after another, and all rows on an accelerator or when the rows
             are split over several devices.
-        solver: as in :func:`simulate` for one row at a time; for groups, the default at
-            moderate tolerances is ``rosenbrock23("stiff")``.
+        solver: as in :func:`simulate`.
         Everything else as in :func:`simulate` (no dense output).
 
     Returns:
@@ -132,7 +131,7 @@ def simulate_batch(
     if n_devices > 1:  # rows sharded over devices are one group: a map over them would gather
         group = padded
     if solver is None:
-        solver = default_solver(rtol, batch=group > 1)
+        solver = default_solver(rtol)
     scene, damping, opts, span, ts = prepare(
         scene, t0, t1, saveat, damping, solver, rtol, atol, max_steps, False, phi_inertia, None
     )

@@ -31,12 +31,13 @@ A W-method's order holding with any ``J`` also lets one ``J`` serve several step
 (CVODE, RADAU5) hold theirs: with ``reuse > 1`` the Jacobian is made at the start of a step
 only after ``reuse`` accepted steps with the last one (or after a jump), and is carried in the
 solver state meanwhile. On one trajectory that makes an exact Jacobian (dear: one vector field
-per state coordinate) affordable; in a ``vmap``-ped batch the choice between making it and
-holding it becomes a select, so every step makes it, and a batch wants ``reuse=1`` with a
-cheap ``J``. With reuse the first step also evaluates ``F0`` itself, in the loop that evaluates
-its stages (the compiled program then holds two copies of the vector field, the stages' and the
-differences', not three: XLA compiles each copy anew); in a batch that choice is a select too,
-one more vector field a step.
+per state coordinate) affordable. Under ``vmap`` the rows make their Jacobians together: when
+any row still stepping needs one, every row makes one and restarts its count (a choice by each
+row's own flag would be a ``vmap``-ped select, which makes it every step). A row then takes
+slightly different steps than alone, never fewer fresh Jacobians. With reuse the first step also
+evaluates ``F0`` itself, in the loop that evaluates its stages (the compiled program then holds
+two copies of the vector field, the stages' and the differences', not three: XLA compiles each
+copy anew); under ``vmap`` it is made when any row needs it.
 
 A held ``J`` ages as the state moves, and the error estimate feels it: with ``J`` not the
 Jacobian the estimate's leading term is of second order, ``(J - df/dy)`` applied along the
@@ -59,6 +60,7 @@ from typing import ClassVar
 
 import diffrax
 import equinox as eqx
+import equinox.internal as eqxi
 import jax
 import jax.numpy as jnp
 from jax.flatten_util import ravel_pytree
@@ -160,6 +162,10 @@ class Rosenbrock23(diffrax.AbstractAdaptiveSolver):
             f0_tree, held, age, known = solver_state
             known = known & ~jnp.asarray(made_jump)
             fresh = (age >= self.reuse) | jnp.asarray(made_jump)
+            # Under vmap the rows make their Jacobians together, when any row still stepping
+            # needs one (a finished row steps from its end to its end): a choice by each row's
+            # own flag would be a select, both sides every step.
+            fresh = eqxi.unvmap_any(fresh & (t1 > t0))
             jac = jax.lax.cond(fresh, lambda: self._jacobian(t0, y0, args, f, None), lambda: held)
             age = jnp.where(fresh, 0, age) + 1
         f0_known = ravel_pytree(f0_tree)[0]
@@ -188,7 +194,9 @@ class Rosenbrock23(diffrax.AbstractAdaptiveSolver):
             if known is True:
                 fx = f(t, x)
             else:
-                fx = jax.lax.cond((i > 0) | ~known, lambda: f(t, x), lambda: f0_known)
+                need = (i > 0) | ~known
+                fx = jax.lax.cond(eqxi.unvmap_any(need), lambda: f(t, x), lambda: f0_known)
+                fx = jnp.where(need, fx, f0_known)
             f0 = jnp.where(i == 0, fx, f0)
             rhs = jnp.select(
                 [i == 0, i == 1],

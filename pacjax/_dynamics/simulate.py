@@ -387,10 +387,11 @@ def rosenbrock23(jacobian: str = "exact", reuse: int | None = None) -> Rosenbroc
             accepted steps (default :data:`JACOBIAN_REUSE`), corrected along each step between
             them (Broyden's update, :class:`Rosenbrock23`'s ``secant``): dear (a vector field
             per state coordinate) but it holds the inertia's fast part, so the steps are several
-            times fewer. ``"stiff"``: :meth:`EquationsOfMotion.stiff_jacobian`, the forces'
-            derivatives with the inertia held, cheap enough to make every step (default
-            ``reuse=1``): :func:`pacjax.simulate_batch`'s choice, since a ``vmap``-ped batch
-            cannot skip making a held Jacobian (:mod:`pacjax._dynamics.rosenbrock`).
+            times fewer. In a ``vmap``-ped group of rows the rows make it together when one
+            needs it (:mod:`pacjax._dynamics.rosenbrock`). ``"stiff"``:
+            :meth:`EquationsOfMotion.stiff_jacobian`, the forces' derivatives with the inertia
+            held, cheap enough to make every step (default ``reuse=1``), but it leaves out the
+            inertia's fast part, so the steps are several times more.
         reuse: accepted steps one Jacobian serves.
 
     Either way the plane angles' errors are weighted by their segments' bends
@@ -413,14 +414,14 @@ def rosenbrock23(jacobian: str = "exact", reuse: int | None = None) -> Rosenbroc
 ROSENBROCK_RTOL = 1e-5
 
 
-def default_solver(rtol: float, batch: bool = False) -> diffrax.AbstractSolver:
-    """From ``rtol >= ROSENBROCK_RTOL``, :func:`rosenbrock23` (for a ``batch``, with the stiff
-    Jacobian every step): one factorisation and two vector fields a step; below it Kvaerno5
-    with :class:`pacjax._chord.DenseChord`, whose fifth order takes fewer (dearer) steps to a
-    tight tolerance."""
+def default_solver(rtol: float) -> diffrax.AbstractSolver:
+    """From ``rtol >= ROSENBROCK_RTOL``, :func:`rosenbrock23` with its held exact Jacobian (a
+    row alone or rows in a ``vmap``-ped group): one factorisation and two vector fields a step;
+    below it Kvaerno5 with :class:`pacjax._chord.DenseChord`, whose fifth order takes fewer
+    (dearer) steps to a tight tolerance."""
     if rtol < ROSENBROCK_RTOL:
         return kvaerno5()
-    return rosenbrock23("stiff" if batch else "exact")
+    return rosenbrock23()
 
 
 #: The vector field as the integration traces it: diffrax and the solvers call it several
