@@ -35,9 +35,9 @@ from .._config import MATMUL_PRECISION
 from .._results import MAX_STEPS_REACHED, NONFINITE, STALLED, SUCCESSFUL
 from . import linalg as _linalg
 from .modes import max_abs, saddle_free_step, stiffness_modes
+from .search import MIN_ALPHA, backtrack, descends, energy_slope
 
 _MIN_DT = 1e-10
-_MIN_ALPHA = 1.0 / 256
 # Scaled residual below which a non-conservative solve tries plain Newton steps first.
 _NEWTON_NEAR = 1e-2
 # Bounds on the growth of dt after a full step (the ratio of the residuals before and after it,
@@ -109,23 +109,6 @@ class _Point(NamedTuple):
     jacobian: Float[Array, "n n"]
     weights: Float[Array, " n"]
     drive: Float[Array, " n"]
-
-
-def _shorter(alpha, merit, merit0, slope):
-    """The next, shorter trial length after ``alpha``, whose merit ``merit`` did not descend.
-
-    The minimiser of the quadratic through the merit and its slope at 0 and the merit at alpha,
-    within [alpha / 10, alpha / 2] (Nocedal and Wright, section 3.5); half the step where that
-    quadratic has no minimum (or the slope is unknown, ``nan``).
-    """
-    # Under vmap the search runs as long as its slowest row, and the rows that overshoot do so
-    # by 8-16x (the paper's robot, third step, where dt has grown to 20 against a soft mode):
-    # halving took them 3-4 trials, the quadratic mostly 1.
-    curv = merit - merit0 - slope * alpha
-    fit = (curv > 0) & (slope < 0)
-    guess = -slope * alpha**2 / (2.0 * jnp.where(fit, curv, 1.0))
-    guess = jnp.where(fit & jnp.isfinite(guess), guess, 0.5 * alpha)
-    return jnp.clip(guess, 0.1 * alpha, 0.5 * alpha)
 
 
 class PseudoTransientContinuation(optx.AbstractRootFinder):
@@ -281,7 +264,7 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
         # is already tiny (it is a descent direction), else shrink dt and stay.
         tiny_dt = state.dt <= _MIN_DT
         accept = ok | tiny_dt
-        alpha = jnp.where(ok, alpha, _MIN_ALPHA)
+        alpha = jnp.where(ok, alpha, MIN_ALPHA)
         new = self._linearise(fn, self._to(args, y, alpha * delta, plain), args, state)
         finite = (
             jnp.all(jnp.isfinite(new.residual))
@@ -376,52 +359,36 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
         return jnp.where(took_newton, full, flow), took_newton
 
     def _search(self, fn, y, args, state: PTCState, delta, took_newton, first, escape, plain):
-        """The length ``alpha`` of the step along ``delta``, and ``ok``: whether it is acceptable.
+        """The length ``alpha`` of the step along ``delta``, and ``ok``: whether it is acceptable
+        (:func:`pacjax._statics.search.backtrack`, on :meth:`_merit_only`).
 
-        Trials ``alpha = 1`` and then ever shorter (:func:`_shorter`) until the merit
-        (:meth:`_merit_only`) does not rise above ``state.merit`` beyond its rounding, down to
-        ``_MIN_ALPHA``. The full step is acceptable unchecked on the first step and an escape,
-        and when its predicted decrease is within rounding (:meth:`_slope`) or, for a
-        non-conservative scene, when it is a Newton step that halved the residual. ``plain``
-        (with ``ahead``): whether the trial points are plain sums (:meth:`_to`).
+        The full step is acceptable unchecked on the first step and an escape, and when its
+        predicted decrease is within rounding (:meth:`_slope`) or, for a non-conservative
+        scene, when it is a Newton step that halved the residual. ``plain`` (with ``ahead``):
+        whether the trial points are plain sums (:meth:`_to`).
         """
-        eps = jnp.finfo(y.dtype).eps
-
-        def descends(merit):
-            slack = 64 * eps * (jnp.abs(state.merit) + jnp.abs(merit))
-            return jnp.isfinite(merit) & (merit <= state.merit + slack)
-
-        # Backtracking on the continuation step, no Jacobian: every trial length is checked on
-        # the merit alone (the residual comes with the Jacobian at the accepted point).
         merit_only = self._merit_only(fn, y, args, state)
-        slope, rounding = self._slope(y, state, delta, eps)
-
-        def search_cond(carry):
-            alpha, _, ok = carry
-            return ~ok & (alpha > _MIN_ALPHA)
-
-        def search_body(carry):
-            alpha, merit, _ = carry
-            alpha = _shorter(alpha, merit, state.merit, slope)
-            merit = merit_only(self._to(args, y, alpha * delta, plain))
-            return alpha, merit, descends(merit) | first | escape
-
+        slope, rounding = self._slope(y, state, delta)
         if self._tries_ahead:
             # Tried at the end of the last step, at this very point (the first step and an
             # escape are taken whatever the merit says).
             m_full = state.ahead_merit
         else:
             m_full = merit_only(_moved(args, y, delta))
-        ok_full = descends(m_full) | rounding | first | escape
+        ok_full = descends(m_full, state.merit) | rounding | first | escape
         if not self.symmetric:
             # A Newton step that halved the residual is taken whatever the merit says: near a
             # solution of a soft structure the frozen work misses the stiffness of the
             # follower loads, and the merit of the Newton step can rise.
             ok_full = ok_full | took_newton
-        alpha, _, ok = jax.lax.while_loop(
-            search_cond, search_body, (jnp.asarray(1.0, y.dtype), m_full, ok_full)
+        return backtrack(
+            lambda alpha: merit_only(self._to(args, y, alpha * delta, plain)),
+            state.merit,
+            m_full,
+            ok_full,
+            slope,
+            take_any=first | escape,
         )
-        return alpha, ok
 
     def _merit_only(self, fn, y, args, state: PTCState):
         """The merit as a function of the trial point, for the search from ``y``.
@@ -444,24 +411,14 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
 
         return merit
 
-    def _slope(self, y, state: PTCState, delta, eps):
-        """The merit's slope along ``delta`` at ``y``, and ``rounding``: the full step is taken.
-
-        Near a solution the merit's change is below its rounding, and a rise there says
-        nothing: a full step whose predicted decrease (the merit's slope along it; its gradient
-        in y is w^2 r, with w = sqrt(d) sigma) is within the rounding of the merit's terms
-        (bounded by the elastic energy w^2 y^2 beside the merit) is taken.
-        """
+    def _slope(self, y, state: PTCState, delta):
+        """The merit's slope along ``delta`` at ``y``, and ``rounding``: the full step is taken
+        (:func:`pacjax._statics.search.energy_slope`). The merit ``|r|^2 / 2`` of a
+        non-conservative scene without ``frozen_work`` is a sum of squares, whose rounding is
+        relative to itself; its slope is not needed, the search halves the step."""
         if self.symmetric or self.frozen_work:
-            slope = jnp.dot(state.weights**2 * state.residual, delta, precision=MATMUL_PRECISION)
-            scale = jnp.abs(state.merit) + jnp.sum((state.weights * y) ** 2)
-            rounding = (slope <= 0) & (-slope <= 64 * eps * scale)
-        else:
-            # The merit |r|^2 / 2 is a sum of squares: its rounding is relative to itself.
-            # Its slope along the step is not needed: the search halves the step.
-            slope = jnp.asarray(jnp.nan, y.dtype)
-            rounding = False
-        return slope, rounding
+            return energy_slope(y, state.weights, state.residual, state.merit, delta)
+        return jnp.asarray(jnp.nan, y.dtype), False
 
     def _linearise(self, fn, y, args, state: PTCState) -> _Point:
         """The residual, merit, weights and Jacobian at ``y`` in one evaluation, and the drive.
