@@ -47,7 +47,8 @@ from .implicit import implicit_equilibrium
 from .modes import max_abs
 from .options import SolverOptions, initial_dt, resolve_options
 from .problem import ScaledProblem, flow_field
-from .ptc import PseudoTransientContinuation, final_code
+from .ptc import PseudoTransientContinuation
+from .ptc_state import final_code
 from .ringcheck import check_rows, warn_sparse_rings
 from .solution import Equilibrium
 

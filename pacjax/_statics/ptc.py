@@ -29,17 +29,16 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import optimistix as optx
-from jaxtyping import Array, Bool, Float, Int
+from jaxtyping import Array, Bool, Float
 
 from .._config import MATMUL_PRECISION
-from .._results import MAX_STEPS_REACHED, NONFINITE, STALLED, SUCCESSFUL
-from . import linalg as _linalg
+from .._results import NONFINITE, STALLED, SUCCESSFUL
+from .flow import shifted_flow_step
 from .modes import max_abs, saddle_free_step, stiffness_modes
+from .ptc_state import PTCState
 from .search import MIN_ALPHA, backtrack, descends, energy_slope
 
 _MIN_DT = 1e-10
-# Scaled residual below which a non-conservative solve tries plain Newton steps first.
-_NEWTON_NEAR = 1e-2
 # Bounds on the growth of dt after a full step (the ratio of the residuals before and after it,
 # switched evolution relaxation). A first step from straight can cut the residual a hundredfold;
 # a tighter cap leaves the next steps short of Newton along the softest mode (the bending
@@ -58,39 +57,6 @@ _LEAVING_STEPS = 16
 # times this (the scaled Hessian moves by about its derivative times the step, O(1) in scaled
 # coordinates; a generous factor, since the next full step is always there to fall back on).
 _AHEAD_EIG_MARGIN = 10.0
-
-
-class PTCState(eqx.Module):
-    residual: Float[Array, " n"]
-    merit: Float[Array, ""]
-    jacobian: Float[Array, "n n"]
-    weights: Float[Array, " n"]
-    dt: Float[Array, ""]
-    step: Int[Array, ""]
-    escapes: Int[Array, ""]
-    # Set by an escape, cleared once the stiffness is no longer indefinite: until then a small
-    # residual is not convergence (see ``terminate``).
-    escaping: Bool[Array, ""]
-    # Steps left after an escape (0 once the stiffness is no longer indefinite) in which a
-    # non-conservative solve takes no plain Newton step (see ``_LEAVING_STEPS``).
-    leaving: Int[Array, ""]
-    eig: Float[Array, ""]
-    eigvals: Float[Array, " n"]
-    eigvecs: Float[Array, "n n"]
-    escape_dy: Float[Array, " n"]
-    # Non-conservative generalised force at ``y`` (scaled), frozen for the merit of the next
-    # step (``frozen_work``).
-    drive: Float[Array, " n"]
-    code: Int[Array, ""]
-    # With ``ahead``: the next step tried from ``y`` along this state's linearisation, its end
-    # point, residual and merit, and the step's size. Where that residual is converged the
-    # solve ends there without a linearisation of its own (``finish``).
-    ahead_y: Float[Array, " n"]
-    ahead_residual: Float[Array, " n"]
-    ahead_merit: Float[Array, ""]
-    ahead_size: Float[Array, ""]
-    # Whether that point is the plain sum ``y + delta`` (see ``_plain_near``).
-    ahead_plain: Bool[Array, ""]
 
 
 def _moved(args, y, dy):
@@ -319,44 +285,19 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
         return delta, took_newton
 
     def _shifted_flow_step(self, fn, y, args, state: PTCState, first, escape):
-        """The continuation step of a non-conservative scene and whether it is a Newton step.
-
-        Solves ``(J + I / dt) dy = -r`` (``dt`` capped by the negative curvature) and ``J dy = -r``
-        in one call, and takes the Newton step where it halves the residual near a solution
-        (one more residual evaluation). Returns ``(step, took_newton)``.
-        """
-        # Non-conservative loads (follower forces, dead moments in 3D): J is not symmetric.
-        # Far from a solution, shift it by enough to dominate the negative curvature of its
-        # symmetric part (a short stretch of the flow). That shift caps dt, so near a
-        # solution whose symmetric part is indefinite (a dead moment bending a twistable rod
-        # past ~2 rad) the capped steps creep; there (scaled residual below
-        # ``_NEWTON_NEAR``, forces 1 % of the elastic scale) the plain Newton step is tried
-        # first and taken when it halves the residual (one more residual evaluation per
-        # such step). Far away it is not: from a straight PCC/PAC segment it jumps to the
-        # spurious polar equilibrium (phi along the moment, no bending).
-        #
-        # Both systems go to LAPACK as one batched factorisation. Two independent solves
-        # are two custom calls that XLA:CPU may run at once, and jaxlib 0.10's batched
-        # LAPACK kernels then each wait on sub-tasks queued to the same intra-op thread
-        # pool: with as many such calls as pool threads (2 on a 2-core machine), every
-        # thread waits and the program hangs (seen in gdb: both in LuDecompositionKernel ->
-        # ParallelBatchMap -> BlockingCounter::Wait). pacjax._statics.linalg keeps every call
-        # below the size that takes that path; one call is also cheaper than two.
-        eye = jnp.eye(y.shape[0], dtype=y.dtype)
-        dt_safe = jnp.where(state.eig < 0, jnp.minimum(state.dt, 0.5 / -state.eig), state.dt)
-        matrices = jnp.stack([state.jacobian + eye / dt_safe, state.jacobian])
-        rhs = jnp.broadcast_to(-state.residual[:, None], (2, y.shape[0], 1))
-        flow, full = _linalg.solve(matrices, rhs)[..., 0]
-
-        near = max_abs(state.residual) <= _NEWTON_NEAR
-        if not self.frozen_work:
-            near = near & (state.eig < 0)
-        # (Under vmap a cond runs both branches: the trial is evaluated for every row.)
-        r_newton, _ = fn(_moved(args, y, full), args)
-        took_newton = near & jnp.all(jnp.isfinite(full)) & jnp.all(jnp.isfinite(r_newton))
-        took_newton = took_newton & (max_abs(r_newton) <= 0.5 * max_abs(state.residual))
-        took_newton = took_newton & ~first & ~escape & (state.leaving == 0)
-        return jnp.where(took_newton, full, flow), took_newton
+        """The continuation step of a non-conservative scene and whether it is a Newton step
+        (:func:`pacjax._statics.flow.shifted_flow_step`); no Newton step on the first step, an
+        escape, or while leaving a saddle."""
+        return shifted_flow_step(
+            lambda y_: fn(y_, args)[0],
+            lambda dy: _moved(args, y, dy),
+            state.jacobian,
+            state.residual,
+            state.dt,
+            state.eig,
+            newton_allowed=~first & ~escape & (state.leaving == 0),
+            near_needs_negative=not self.frozen_work,
+        )
 
     def _search(self, fn, y, args, state: PTCState, delta, took_newton, first, escape, plain):
         """The length ``alpha`` of the step along ``delta``, and ``ok``: whether it is acceptable
@@ -412,10 +353,9 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
         return merit
 
     def _slope(self, y, state: PTCState, delta):
-        """The merit's slope along ``delta`` at ``y``, and ``rounding``: the full step is taken
-        (:func:`pacjax._statics.search.energy_slope`). The merit ``|r|^2 / 2`` of a
-        non-conservative scene without ``frozen_work`` is a sum of squares, whose rounding is
-        relative to itself; its slope is not needed, the search halves the step."""
+        """The merit's slope along ``delta`` at ``y`` and ``rounding`` (take the full step):
+        :func:`pacjax._statics.search.energy_slope`. Not for the merit ``|r|^2 / 2``, a sum of
+        squares whose rounding is relative to itself: the search halves its steps."""
         if self.symmetric or self.frozen_work:
             return energy_slope(y, state.weights, state.residual, state.merit, delta)
         return jnp.asarray(jnp.nan, y.dtype), False
@@ -461,9 +401,7 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
         # (the flow direction is not a descent direction of |r|^2 where the Jacobian of a
         # non-conservative scene is far from symmetric, or round-off rules at a floor). The
         # forced shortest steps do not move the iterate: stop, so that a retry can start, instead
-        # of creeping to the step limit (a follower-force row of the paper's robot with
-        # PolynomialCurvature(3) sat at residual 1.4e-2 for 297 of its 300 steps, the other
-        # rows of its batch idle beside it).
+        # of creeping to the step limit while the other rows of a batch wait.
         stalled = tiny_dt & (~ok | ~accept)
         code = jnp.where(stalled & (code == SUCCESSFUL), STALLED, code)
         return PTCState(
@@ -544,12 +482,3 @@ class PseudoTransientContinuation(optx.AbstractRootFinder):
     def postprocess(self, fn, y, aux, args, options, state, tags, result):
         del fn, args, options, tags, result
         return self.finish(y, state)[0], aux, {}
-
-
-def final_code(state: PTCState, converged) -> Int[Array, ""]:
-    """The :class:`pacjax.RESULTS` code after a run (see :func:`pacjax._results.from_code`)."""
-    return jnp.where(
-        converged,
-        SUCCESSFUL,
-        jnp.where(state.code == SUCCESSFUL, MAX_STEPS_REACHED, state.code),
-    )
