@@ -67,10 +67,12 @@ class Damping(eqx.Module):
         if not (np.isfinite(ratio) and ratio >= 0):
             raise ValueError(f"ratio must be a finite number >= 0, got {ratio}")
         dtype = solver_dtype(scene)
-        omega = jnp.sqrt(jnp.min(_rest_eigenvalues(scene, dtype)))
+        eigenvalues = _rest_eigenvalues(scene, dtype)
+        omega = jnp.sqrt(jnp.min(eigenvalues))
         value = concrete(omega)
         if value is not None and not (np.isfinite(value) and value > 0):
             _raise_singular(scene, dtype, value)
+        _check_precision(scene, dtype, concrete(eigenvalues))
         return cls(stiffness=2.0 * ratio / omega, **kwargs)
 
     def tendon_gains(self, scene: Scene, dtype) -> Float[Array, " m"]:
@@ -79,6 +81,30 @@ class Damping(eqx.Module):
             return jnp.broadcast_to(self.tendon.astype(dtype), (scene.n_tendons,))
         gains = [t.gain if t.mode == "length" else jnp.zeros(()) for t in scene.tendons]
         return self.stiffness.astype(dtype) * jnp.stack(gains).astype(dtype)
+
+
+#: Relative error of a rest mode's eigenvalue, against float64's, beyond which a lower precision
+#: does not resolve the mass matrix.
+MODE_TOLERANCE = 0.1
+
+
+def _check_precision(scene: Scene, dtype, eigenvalues) -> None:
+    """Refuse a precision below float64 whose rest modes (``eigenvalues``, None where traced)
+    are more than :data:`MODE_TOLERANCE` off float64's: its mass matrix is singular there even
+    where its Cholesky factor happens to exist (which rounding decides), and a simulation of
+    the wrong fast modes creeps at tiny steps."""
+    if eigenvalues is None or jnp.dtype(dtype) == jnp.float64:
+        return
+    wide = concrete(_rest_eigenvalues(astype(scene, jnp.float64), jnp.float64))
+    if wide is None or not (np.all(np.isfinite(wide)) and np.all(wide > 0)):
+        return
+    error = float(np.max(np.abs(eigenvalues - wide) / wide))
+    if not error <= MODE_TOLERANCE:
+        raise ValueError(
+            f"the mass matrix of the robot is singular in {jnp.dtype(dtype).name} (its rest "
+            f"modes are up to {error:.0%} off those in float64): simulate this scene in "
+            "float64, pj.astype(scene, jnp.float64)"
+        )
 
 
 def _raise_singular(scene: Scene, dtype, value) -> None:
