@@ -68,12 +68,8 @@ class Damping(eqx.Module):
             raise ValueError(f"ratio must be a finite number >= 0, got {ratio}")
         dtype = solver_dtype(scene)
         eigenvalues = _rest_eigenvalues(scene, dtype)
-        omega = jnp.sqrt(jnp.min(eigenvalues))
-        value = concrete(omega)
-        if value is not None and not (np.isfinite(value) and value > 0):
-            _raise_singular(scene, dtype, value)
-        _check_precision(scene, dtype, concrete(eigenvalues))
-        return cls(stiffness=2.0 * ratio / omega, **kwargs)
+        _check_rest_modes(scene, dtype, concrete(eigenvalues))
+        return cls(stiffness=2.0 * ratio / jnp.sqrt(jnp.min(eigenvalues)), **kwargs)
 
     def tendon_gains(self, scene: Scene, dtype) -> Float[Array, " m"]:
         """``kappa_D`` (N s/m) per tendon (tension-mode tendons ignore theirs)."""
@@ -88,47 +84,43 @@ class Damping(eqx.Module):
 MODE_TOLERANCE = 0.1
 
 
-def _check_precision(scene: Scene, dtype, eigenvalues) -> None:
-    """Refuse a precision below float64 whose rest modes (``eigenvalues``, None where traced)
-    are more than :data:`MODE_TOLERANCE` off float64's: its mass matrix is singular there even
-    where its Cholesky factor happens to exist (which rounding decides), and a simulation of
-    the wrong fast modes creeps at tiny steps."""
-    if eigenvalues is None or jnp.dtype(dtype) == jnp.float64:
-        return
-    wide = concrete(_rest_eigenvalues(astype(scene, jnp.float64), jnp.float64))
-    if wide is None or not (np.all(np.isfinite(wide)) and np.all(wide > 0)):
-        return
-    error = float(np.max(np.abs(eigenvalues - wide) / wide))
-    if not error <= MODE_TOLERANCE:
-        raise ValueError(
-            f"the mass matrix of the robot is singular in {jnp.dtype(dtype).name} (its rest "
-            f"modes are up to {error:.0%} off those in float64): simulate this scene in "
-            "float64, pj.astype(scene, jnp.float64)"
-        )
+def _check_rest_modes(scene: Scene, dtype, eigenvalues) -> None:
+    """Refuse a mass matrix singular in this precision (``eigenvalues``: the rest modes'
+    squared frequencies, None where traced), naming the cause, not "Damping.stiffness must be
+    finite".
 
-
-def _raise_singular(scene: Scene, dtype, value) -> None:
-    """Say why the lowest mode at rest is not a positive number (``M`` singular), not
-    "Damping.stiffness must be finite": the precision where float64 resolves it (the mass
-    matrix of three 0.1 m ``PolynomialCurvature(3)`` segments is conditioned at 2e11, past
-    float32's rounding), else the lightest segment (a density of 1e-308 kg/m passes the
-    > 0 check)."""
+    Below float64 the modes are compared with float64's: where float64 resolves them and this
+    precision's are not positive or more than :data:`MODE_TOLERANCE` off, the precision is the
+    cause (the mass matrix of three 0.1 m ``PolynomialCurvature(3)`` segments is conditioned at
+    2e11, past float32's rounding; whether its float32 Cholesky factor exists is up to the
+    rounding, and a simulation of the wrong fast modes creeps at tiny steps). Otherwise a mode
+    that is not positive names the lightest segment (a density of 1e-308 kg/m passes the > 0
+    check)."""
+    if eigenvalues is None:
+        return
+    lowest = float(np.min(eigenvalues))
+    resolved = bool(np.isfinite(lowest) and lowest > 0)
+    omega = np.sqrt(lowest) if resolved else np.nan  # rad/s
     if jnp.dtype(dtype) != jnp.float64:
-        wide = concrete(
-            jnp.sqrt(jnp.min(_rest_eigenvalues(astype(scene, jnp.float64), jnp.float64)))
+        wide = concrete(_rest_eigenvalues(astype(scene, jnp.float64), jnp.float64))
+        if wide is not None and np.all(np.isfinite(wide)) and np.all(wide > 0):
+            error = float(np.max(np.abs(eigenvalues - wide) / wide))
+            if not (resolved and error <= MODE_TOLERANCE):
+                raise ValueError(
+                    f"the mass matrix of the robot is singular in {jnp.dtype(dtype).name} "
+                    f"(lowest mode {omega}, "
+                    f"{np.sqrt(np.min(wide)):.4g} rad/s in float64; its rest modes up to "
+                    f"{error:.0%} off): simulate this scene in float64, "
+                    "pj.astype(scene, jnp.float64)"
+                )
+            return
+    if not resolved:
+        lightest = min(float(seg.linear_density) for seg in scene.robot.segments)
+        raise ValueError(
+            "the mass matrix of the robot is singular in this precision (lowest mode "
+            f"{omega}): a segment's linear_density "
+            f"({lightest:g} kg/m) is too small to simulate dynamics"
         )
-        if wide is not None and np.isfinite(wide) and wide > 0:
-            raise ValueError(
-                f"the mass matrix of the robot is singular in {jnp.dtype(dtype).name} (lowest "
-                f"mode {value}; {wide:.4g} rad/s in float64): simulate this scene in float64, "
-                "pj.astype(scene, jnp.float64)"
-            )
-    lightest = min(float(seg.linear_density) for seg in scene.robot.segments)
-    raise ValueError(
-        "the mass matrix of the robot is singular in this precision (lowest mode "
-        f"{value}): a segment's linear_density ({lightest:g} kg/m) is too small to "
-        "simulate dynamics"
-    )
 
 
 @jit  # run once per scene: the statics' compile options (pacjax._jit)
