@@ -31,6 +31,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import lineax as lx
+import numpy as np
 from jaxtyping import Array, Float
 
 from .._config import MATMUL_PRECISION
@@ -80,25 +81,23 @@ class EquationsOfMotion(eqx.Module):
 
         return jax.grad(rate_energy)(qdot)
 
+    def _length_mode(self, dtype):
+        """Which tendons hold a commanded length (static), and their ``kappa_P`` (N/m; 1 for
+        tension-mode tendons, whose gain is unused), as whole vectors: written tendon by tendon
+        the vector field held a slice and a scatter per tendon and derivative."""
+        mask = np.array([t.mode == "length" for t in self.scene.tendons])
+        gains = [t.gain if t.mode == "length" else jnp.ones(()) for t in self.scene.tendons]
+        return mask, jnp.stack(gains).astype(dtype)
+
     def _motor_law(self, lengths, rates, u, udot):
         """Tendon tensions (N) under the motor PD law, and their derivative in the tendon
         rates (the derivative gain while the tendon is taut, zero when slack or in tension
         mode)."""
+        mask, gain = self._length_mode(lengths.dtype)
         rest = self.scene.rest_tendon_lengths(lengths.dtype)
-        tension, gains = [], []
-        for i, t in enumerate(self.scene.tendons):
-            if t.mode == "length":
-                stretch = lengths[i] - (rest[i] - u[i])
-                stretch_rate = rates[i] + udot[i]
-                pull = (
-                    t.gain.astype(lengths.dtype) * stretch + self.tendon_damping[i] * stretch_rate
-                )
-                tension.append(jnp.maximum(pull, 0.0))
-                gains.append(jnp.where(pull > 0, self.tendon_damping[i], 0.0))
-            else:
-                tension.append(u[i])
-                gains.append(jnp.zeros((), lengths.dtype))
-        return jnp.stack(tension), jnp.stack(gains)
+        pull = gain * (lengths - (rest - u)) + self.tendon_damping * (rates + udot)
+        tension = jnp.where(mask, jnp.maximum(pull, 0.0), u)
+        return tension, jnp.where(mask & (pull > 0), self.tendon_damping, 0.0)
 
     def tendon_forces(self, q, qdot, u, udot):
         """``A(q) f_act``: generalised forces of the tendons under the motor PD law."""
@@ -187,14 +186,8 @@ class EquationsOfMotion(eqx.Module):
         rates ``rates``: ``kappa_P (l - l_bar') = kappa_P (l - l_bar) + kappa_D (l_dot +
         l_bar_dot)``, i.e. ``u' = u + kappa_D / kappa_P (l_dot + u_dot)`` in length mode (the
         gain is positive there); tension mode pulls with ``u`` already."""
-        out = []
-        for i, t in enumerate(self.scene.tendons):
-            if t.mode == "length":
-                ratio = self.tendon_damping[i] / t.gain.astype(u.dtype)
-                out.append(u[i] + ratio * (rates[i] + udot[i]))
-            else:
-                out.append(u[i])
-        return jnp.stack(out)
+        mask, gain = self._length_mode(u.dtype)
+        return u + jnp.where(mask, self.tendon_damping / gain, 0.0) * (rates + udot)
 
 
 def control_fn(controls, n_tendons: int, dtype) -> Callable:

@@ -47,7 +47,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from .._config import MATMUL_PRECISION
-from .kinematics import Knots, chain_segments
+from .kinematics import Knots, chain_segments, knot_frames
 from .loads import PointMass
 from .quadrature import gauss_legendre
 from .rotation import cross3, matmul3, matvec3
@@ -165,9 +165,9 @@ def mass_matrix(
     groups = inertia_sites(scene, q.dtype)
     if len(groups) > 1:
         return chained_body_dynamics(scene, q, jnp.zeros_like(q), phi_inertia)[0]
-    knots, _, masses, moments = _site_knots(scene, q.dtype)
-    jac_pos, jac_ang = _site_jacobians(scene, q, knots)
-    return _mass_from_jacobians(scene, jac_pos, jac_ang, masses, moments, phi_inertia)
+    lumped = _knot_masses(scene, q.dtype)
+    jac_pos, jac_ang = _knot_jacobians(scene, q, lumped.knots)
+    return _mass_from_jacobians(scene, jac_pos, jac_ang, lumped.masses, lumped.moments, phi_inertia)
 
 
 def coriolis_forces(
@@ -237,7 +237,7 @@ def chained_body_dynamics(
         def kinematics(x, segs=segs, s=s):
             return scene.frames(x, segs, s)
 
-        omega, acc, alpha = _site_accelerations(scene, segs, s, q, qdot)
+        omega, acc, alpha = _site_accelerations(kinematics, q, qdot)
         (rot, _), lin = jax.linearize(kinematics, q)
         d_rot, d_pos = jax.vmap(lin)(jnp.eye(n, dtype=dtype))  # (n, p, 3, 3), (n, p, 3)
         mat = mat + jnp.einsum("ipa,p,jpa->ij", d_pos, masses, d_pos, precision=MATMUL_PRECISION)
@@ -257,13 +257,14 @@ def chained_body_dynamics(
     return 0.5 * (mat + mat.T), bias
 
 
-def _site_accelerations(scene: Scene, segs, s, q, qdot):
-    """Body angular velocities ``omega`` of the points ``(segs, s)`` and their world and
-    angular accelerations at zero ``qddot`` (``a_0 = (dJ/dq qdot) qdot``, ``alpha_0``): the
-    second directional derivative of their frames along ``qdot`` (nested ``jvp``)."""
+def _site_accelerations(frames, q, qdot):
+    """Body angular velocities ``omega`` of the points whose world frames are ``frames(q)``
+    (rotations, positions) and their world and angular accelerations at zero ``qddot``
+    (``a_0 = (dJ/dq qdot) qdot``, ``alpha_0``): the second directional derivative of their
+    frames along ``qdot`` (nested ``jvp``)."""
 
     def velocities(x):
-        (rot, _), (rot_dot, vel) = jax.jvp(lambda y: scene.frames(y, segs, s), (x,), (qdot,))
+        (rot, _), (rot_dot, vel) = jax.jvp(frames, (x,), (qdot,))
         return vel, _vee_skew(
             jnp.matmul(jnp.swapaxes(rot, -1, -2), rot_dot, precision=MATMUL_PRECISION)
         )
@@ -299,11 +300,11 @@ def _segment_frames(scene: Scene, q: Float[Array, " n_dofs"], knots: Knots) -> _
     return _SegmentFrames(rot, d_rot, d_pos, base_rot, world_rot, world_pos)
 
 
-def _site_jacobians(
+def _knot_jacobians(
     scene: Scene, q: Float[Array, " n_dofs"], knots: Knots
-) -> tuple[Float[Array, "p n_dofs 3"], Float[Array, "p n_dofs 3"]]:
-    """Jacobians of the world velocities and body angular velocities of the mass points
-    (the knots' requested points) along ``q``, from each segment's local Jacobian.
+) -> tuple[Float[Array, "k n_dofs 3"], Float[Array, "k n_dofs 3"]]:
+    """Jacobians along ``q`` of the world velocities and body angular velocities of the frames
+    at every knot (segment by segment, flattened), from each segment's local Jacobian.
 
     Segment ``j``'s coordinates move its own points through its local kinematics, and
     every point beyond its end rigidly, with the twist its end frame gets: a point ``x`` of
@@ -344,18 +345,51 @@ def _site_jacobians(
     jac_ang = beyond * far_ang + same * own_ang[:, :, None]
     free = scene.free_coordinates()
 
-    def at_sites(jac):
-        flat = knots.select(jac).reshape(-1, n * d, 3)
-        return flat if free is None else flat[:, free]
+    def flat(jac):
+        jac = jac.reshape(-1, n * d, 3)
+        return jac if free is None else jac[:, free]
 
-    return at_sites(jac_pos), at_sites(jac_ang)
+    return flat(jac_pos), flat(jac_ang)
 
 
-def _site_knots(scene: Scene, dtype):
-    """The single group of mass points with known sites, and the knots that hold them."""
+class _KnotMasses(NamedTuple):
+    """The mass points with known sites, lumped on the knots that hold them: the inertia is
+    summed over every knot (zero where none lies), so no point is picked out of the knot
+    grid: picking them out (:meth:`Knots.select`, a static slice per run of points and per
+    derivative) would be 126 of the paper's robot's 476 XLA instructions of the vector field."""
+
+    knots: Knots
+    masses: Array  # (k,) kg at each knot, segment by segment
+    moments: Array  # (k, 3) principal moments of inertia (kg m^2) in the knot's frame
+
+
+def _knot_masses(scene: Scene, dtype) -> _KnotMasses:
     ((segs, s, masses, moments),) = inertia_sites(scene, dtype)
     knots = Knots(scene.n_segments, segs, s, scene.kinematics.min_intervals)
-    return knots, (segs, s), masses, moments
+    size = knots.s.size
+    # Points at one knot (a segment's end mass and a payload there) add up.
+    return _KnotMasses(
+        knots,
+        jnp.zeros(size, dtype).at[knots.flat_index].add(masses),
+        jnp.zeros((size, 3), dtype).at[knots.flat_index].add(moments),
+    )
+
+
+def _knot_world_frames(scene: Scene, knots: Knots):
+    """``q -> (rotations (k, 3, 3), positions (k, 3))`` of the world frames at every knot."""
+
+    def frames(q):
+        rot, pos, _ = knot_frames(
+            scene.model,
+            scene.coordinates(q),
+            scene.robot.stacked("length").astype(q.dtype),
+            scene.robot.base_rotation,
+            scene.robot.base_position,
+            knots,
+        )
+        return rot.reshape(-1, 3, 3), pos.reshape(-1, 3)
+
+    return frames
 
 
 def structured_body_dynamics(
@@ -365,13 +399,15 @@ def structured_body_dynamics(
     phi_inertia: float = PHI_INERTIA_FACTOR,
 ) -> tuple[Float[Array, "n_dofs n_dofs"], Float[Array, " n_dofs"]]:
     """:func:`chained_body_dynamics`' ``M`` and ``C qdot`` from the segments' local
-    Jacobians (:func:`_site_jacobians`), for mass points whose sites are all known."""
-    knots, (segs, s), masses, moments = _site_knots(scene, q.dtype)
-    jac_pos, jac_ang = _site_jacobians(scene, q, knots)
+    Jacobians (:func:`_knot_jacobians`), for mass points whose sites are all known."""
+    lumped = _knot_masses(scene, q.dtype)
+    jac_pos, jac_ang = _knot_jacobians(scene, q, lumped.knots)
     # The accelerations by forward derivatives of the frames alone: a derivative of the
     # segments' local Jacobians along qdot would carry the kinematics' third derivatives.
-    omega, acc, alpha = _site_accelerations(scene, segs, s, q, qdot)
+    frames = _knot_world_frames(scene, lumped.knots)
+    omega, acc, alpha = _site_accelerations(frames, q, qdot)
     mm = MATMUL_PRECISION
+    masses, moments = lumped.masses, lumped.moments
     euler = moments * alpha + jnp.cross(omega, moments * omega)
     bias = jnp.einsum("pia,p,pa->i", jac_pos, masses, acc, precision=mm)
     bias = bias + jnp.einsum("pia,pa->i", jac_ang, euler, precision=mm)
