@@ -353,10 +353,10 @@ def _knot_jacobians(
 
 
 class _KnotMasses(NamedTuple):
-    """The mass points with known sites, lumped on the knots that hold them: the inertia is
-    summed over every knot (zero where none lies), so no point is picked out of the knot
-    grid: picking them out (:meth:`Knots.select`, a static slice per run of points and per
-    derivative) would be 126 of the paper's robot's 476 XLA instructions of the vector field."""
+    """The mass points with known sites, lumped on the knots that hold them. The inertia is
+    summed over every knot (zero where none lies) rather than over points picked out of the
+    knot grid: :meth:`Knots.select` takes a static slice per run of points and per derivative,
+    126 of the 476 XLA instructions of the paper's robot's vector field."""
 
     knots: Knots
     masses: Array  # (k,) kg at each knot, segment by segment
