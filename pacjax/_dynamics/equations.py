@@ -83,8 +83,8 @@ class EquationsOfMotion(eqx.Module):
 
     def _length_mode(self, dtype):
         """Which tendons hold a commanded length (static), and their ``kappa_P`` (N/m; 1 for
-        tension-mode tendons, whose gain is unused), as whole vectors: written tendon by tendon
-        the vector field held a slice and a scatter per tendon and derivative."""
+        tension-mode tendons, whose gain is unused), as whole vectors: tendon by tendon, each
+        tendon's slice and scatter would be a kernel of its own, in every derivative."""
         mask = np.array([t.mode == "length" for t in self.scene.tendons])
         gains = [t.gain if t.mode == "length" else jnp.ones(()) for t in self.scene.tendons]
         return mask, jnp.stack(gains).astype(dtype)
