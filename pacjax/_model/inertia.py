@@ -356,8 +356,8 @@ class _KnotMasses(NamedTuple):
     """The mass points with known sites, lumped on the knots that hold them. The inertia is
     summed over every knot (zero where none lies) rather than over points picked out of the
     knot grid: :meth:`Knots.select` takes a static slice per run of points and per derivative,
-    each a kernel of its own on XLA:CPU, where the few knots without mass cost nothing
-    measurable."""
+    each a kernel of its own on XLA:CPU, where the knots without mass only add arithmetic to
+    kernels that run anyway."""
 
     knots: Knots
     masses: Array  # (k,) kg at each knot, segment by segment
