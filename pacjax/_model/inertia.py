@@ -47,7 +47,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from .._config import MATMUL_PRECISION
-from .kinematics import Knots, chain_segments, knot_frames
+from .kinematics import Knots, chain_segments
 from .loads import PointMass
 from .quadrature import gauss_legendre
 from .rotation import cross3, matmul3, matvec3
@@ -380,14 +380,7 @@ def _knot_world_frames(scene: Scene, knots: Knots):
     """``q -> (rotations (k, 3, 3), positions (k, 3))`` of the world frames at every knot."""
 
     def frames(q):
-        rot, pos, _ = knot_frames(
-            scene.model,
-            scene.coordinates(q),
-            scene.robot.stacked("length").astype(q.dtype),
-            scene.robot.base_rotation,
-            scene.robot.base_position,
-            knots,
-        )
+        rot, pos = scene.knot_grid_frames(q, knots)
         return rot.reshape(-1, 3, 3), pos.reshape(-1, 3)
 
     return frames

@@ -254,6 +254,13 @@ class Scene(eqx.Module):
         """Frames at points with concrete ``s`` (the knot path of
         :mod:`pacjax._model.kinematics`)."""
         knots = Knots(self.n_segments, segment, s, self.kinematics.min_intervals)
+        rot, pos = self.knot_grid_frames(q, knots)
+        return knots.select(rot), knots.select(pos)
+
+    def knot_grid_frames(
+        self, q: Float[Array, " n_dofs"], knots: Knots
+    ) -> tuple[Float[Array, "n k 3 3"], Float[Array, "n k 3"]]:
+        """World rotations and positions (m) at every knot of ``knots``, segment by segment."""
         rot, pos, _ = knot_frames(
             self.model,
             self.coordinates(q),
@@ -262,7 +269,7 @@ class Scene(eqx.Module):
             self.robot.base_position,
             knots,
         )
-        return knots.select(rot), knots.select(pos)
+        return rot, pos
 
     def tendon_lengths(self, q: Float[Array, " n_dofs"]) -> Float[Array, " m"]:
         """Length (m) of every tendon at configuration ``q``."""
