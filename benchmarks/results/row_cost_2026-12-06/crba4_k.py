@@ -1,5 +1,5 @@
 import re
-exec(open("crba2.py").read())
+exec(open("crba4.py").read())
 q = jnp.asarray(np.asarray(start.q) + 0.05 * rng.standard_normal(n)); v = jnp.asarray(rng.standard_normal(n))
 M0, b0 = jax.jit(lambda q, v: I.structured_body_dynamics(sc, q, v, 1e-6))(q, v)
 M1, b1 = jax.jit(lambda q, v: composite(sc, q, v))(q, v)
