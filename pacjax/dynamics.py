@@ -9,6 +9,7 @@ from ._dynamics.equations import natural_frequencies as natural_frequencies
 from ._dynamics.equations import total_energy as total_energy
 from ._dynamics.rosenbrock import Rosenbrock23 as Rosenbrock23
 from ._dynamics.simulate import ATOL as ATOL
+from ._dynamics.simulate import KNOT_GRID as KNOT_GRID
 from ._dynamics.simulate import RTOL as RTOL
 from ._dynamics.simulate import Trajectory as Trajectory
 from ._dynamics.simulate import rosenbrock23 as rosenbrock23

@@ -236,6 +236,21 @@ def test_input_validation():
             pj.simulate(SCENE, (0.0, 1.0), dt0=dt0)
 
 
+def test_simulations_at_control_tolerances_take_the_dynamics_knot_grid():
+    """At ``rtol >= ROSENBROCK_RTOL`` a scene that sets no knot grid is simulated on
+    :data:`pacjax.dynamics.KNOT_GRID` (its frames within ``tests/test_kinematics.py``'s bounds
+    of the statics' grid); a reference tolerance, or a grid the scene sets, keeps the scene's."""
+    from pacjax._dynamics.simulate import ROSENBROCK_RTOL, prepare
+
+    def grid(scene, rtol):
+        args = (0.0, 0.1, None, pj.Damping(), None, rtol, 1e-6, 100, False, 1e-6, None)
+        return prepare(scene, *args)[0].knot_grid
+
+    assert grid(SCENE, dyn.RTOL) == grid(SCENE, ROSENBROCK_RTOL) == dyn.KNOT_GRID == (4, 3)
+    assert grid(SCENE, ROSENBROCK_RTOL / 10) is None
+    assert grid(SCENE.replace(knot_grid=(8, 4)), dyn.RTOL) == (8, 4)
+
+
 @pytest.mark.slow  # a fresh Python process that compiles a simulation (17 s): CI's slow step
 def test_a_simulation_can_be_kept_in_the_compilation_cache():
     """JAX's persistent cache stores no program that calls back into Python. diffrax checks the

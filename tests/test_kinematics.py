@@ -282,6 +282,28 @@ def test_polynomial_twist_matches_fine_integration_and_magnus_converges():
     assert pj.Scene(_robot(), model).kinematics.min_intervals == 8
 
 
+def test_dynamics_knot_grid_places_the_frames_as_the_statics_grid_does():
+    """The dynamics' coarser knot grid (:data:`pacjax.dynamics.KNOT_GRID`, three position nodes
+    on at least four intervals a segment) against the statics' default (positions to
+    round-off), on the paper's robot with PAC, its curvature halving along each segment: the
+    same rotations (closed form), and positions at the segments' middles and ends within 3e-8 m
+    while each segment turns by up to 2 rad and 1e-6 m at 4.5 rad (measured 3.8e-11, 5.9e-9 and
+    1.7e-7 m at 0.5, 2 and 4.5 rad). These grids are the coarsest the knot path takes: a
+    simulation's also holds the quadrature nodes."""
+    scene = pj.presets.stella2023(pj.PAC())
+    coarse = scene.replace(knot_grid=pj.dynamics.KNOT_GRID)
+    assert coarse.kinematics.grid == (4, 3) and scene.kinematics.grid == (8, 4)
+    segments, s = np.repeat(np.arange(3), 2), np.tile([0.5, 1.0], 3)
+    frames = jax.jit(lambda sc, q: sc.frames(q, segments, s))
+    # (c0, c1) per segment turn it by c0 + c1 / 2 rad.
+    for turn, bound in ((0.5, 2e-10), (2.0, 3e-8), (4.5, 1e-6)):
+        q = jnp.tile(jnp.array([4 * turn / 3, -2 * turn / 3, 0.7, 0.002]), 3)
+        (rot_f, pos_f), (rot_c, pos_c) = frames(scene, q), frames(coarse, q)
+        np.testing.assert_allclose(rot_c, rot_f, rtol=0, atol=1e-15)
+        assert np.abs(pos_c - pos_f).max() < bound, (turn, np.abs(pos_c - pos_f).max())
+        assert np.abs(pos_c - pos_f).max() > 0
+
+
 def test_polynomial_planar_matches_pac_and_is_exact_in_one_step():
     """With a fixed plane, polynomial curvature of order 1 is PAC and Magnus is exact."""
     poly = pj.Scene(_robot(), pj.PolynomialCurvature(order=1), rotation_substeps=1)
@@ -832,26 +854,32 @@ def test_plane_frame_derivatives_are_the_autodiff_ones(model):
     (:func:`pacjax._model.kinematics.segment_knot_jacobian`, :func:`segment_knot_curvature`) equal
     ``jax.jacfwd`` and ``jax.hessian`` of the frames: straight, at 1e-9 rad (where ``phi`` is
     nearly undefined), and bent by several rad; with and without the weighted tangent
-    integral; with an empty padding interval at the end."""
+    integral; with an empty padding interval at the end. On the dynamics' knot grid
+    (:data:`pacjax.dynamics.KNOT_GRID`: three position nodes an interval; the statics' four are
+    what every other test here takes)."""
+    import functools
+
     import jax.tree_util as jtu
 
-    from pacjax._model.kinematics import _INTERVAL_NODES, segment_knot_frames
+    from pacjax._model.kinematics import segment_knot_frames
 
+    nodes = pj.dynamics.KNOT_GRID[1]
+    frames = functools.partial(segment_knot_frames, interval_nodes=nodes)
     rng = np.random.default_rng(0)
     inner = np.sort(rng.uniform(0.0, 1.0, 9))
     knots = jnp.asarray(np.concatenate([[0.0], inner, [1.0, 1.0]]))
     d = model.dofs_per_segment()
-    weights = jnp.asarray(rng.uniform(0.0, 1.0, (len(knots) - 1, _INTERVAL_NODES)))
+    weights = jnp.asarray(rng.uniform(0.0, 1.0, (len(knots) - 1, nodes)))
     length = jnp.asarray(0.12)
     for bend in (0.0, 1e-9, 1.0, 4.0):
         q = jnp.asarray(
             np.concatenate([rng.normal(0.0, bend, d - 2), [rng.uniform(-3, 3)], [0.004]])
         )
         for node_weights in (weights, None):
-            shapes = jax.eval_shape(segment_knot_frames, model, q, length, knots, node_weights)
+            shapes = jax.eval_shape(frames, model, q, length, knots, node_weights)
             lam = jtu.tree_map(lambda x: jnp.asarray(rng.normal(size=x.shape)), shapes)
             value, val, jac, jac_ad, hess, hess_ad = _knot_frame_derivatives(
-                model, q, length, knots, node_weights, lam
+                model, q, length, knots, node_weights, lam, nodes
             )
             for got, want in zip(jtu.tree_leaves(val), jtu.tree_leaves(value), strict=True):
                 np.testing.assert_array_equal(got, want)
@@ -899,7 +927,7 @@ def test_plane_rotation_jet_is_the_spec_rotation_and_its_derivatives(frame):
 
 
 @eqx.filter_jit
-def _knot_frame_derivatives(model, q, length, knots, node_weights, lam):
+def _knot_frame_derivatives(model, q, length, knots, node_weights, lam, nodes):
     """The knot frames, and their first and second derivatives both written out and by
     autodiff, in one program (compiled once per model and weighting, not op by op)."""
     import jax.tree_util as jtu
@@ -911,14 +939,14 @@ def _knot_frame_derivatives(model, q, length, knots, node_weights, lam):
     )
 
     def frames(y):
-        return segment_knot_frames(model, y, length, knots, node_weights)
+        return segment_knot_frames(model, y, length, knots, node_weights, interval_nodes=nodes)
 
     def pull(y):
         pairs = zip(jtu.tree_leaves(lam), jtu.tree_leaves(frames(y)), strict=True)
         return sum(jnp.sum(a * b) for a, b in pairs)
 
-    jac, val = segment_knot_jacobian(model, q, length, knots, node_weights)
-    hess = segment_knot_curvature(model, q, length, knots, node_weights, lam)
+    jac, val = segment_knot_jacobian(model, q, length, knots, node_weights, interval_nodes=nodes)
+    hess = segment_knot_curvature(model, q, length, knots, node_weights, lam, interval_nodes=nodes)
     return frames(q), val, jac, jax.jacfwd(frames)(q), hess, jax.hessian(pull)(q)
 
 

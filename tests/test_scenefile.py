@@ -68,6 +68,7 @@ def full_scene() -> pj.Scene:
         markers=[(0, 0.5), (2, 1.0, (0.0, 0.01, 0.0))],
         quadrature_points=6,
         rotation_substeps=3,
+        knot_grid=(6, 3),
     )
 
 
@@ -337,6 +338,14 @@ MALFORMED = {
         ["model", "unknown key(s) 'order'"],
     ),
     "segments not tables": ("segments = 1\n", ["segments", "array of tables"]),
+    "knot grid of one number": (
+        BASE + "[model]\ntype = 'PAC'\nknot_grid = 4\n",
+        ["model.knot_grid", "expected a list of 2 integers"],
+    ),
+    "knot grid of no nodes": (
+        BASE + "[model]\ntype = 'PAC'\nknot_grid = [4, 0]\n",
+        ["model.knot_grid", "must be >= 1"],
+    ),
     "string follower": (
         BASE + '[[loads]]\ntype = "point_force"\nforce = [1, 0, 0]\nsegment = 0\n'
         'follower = "yes"\n',

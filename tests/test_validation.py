@@ -255,6 +255,11 @@ def test_scene_structure_settings_and_markers():
         pj.Scene(robot, pj.PAC(), quadrature_points=0)
     with pytest.raises(ValueError, match="Scene.rotation_substeps"):
         pj.Scene(robot, pj.PAC(), rotation_substeps=0)
+    with pytest.raises(ValueError, match=r"Scene.knot_grid must be >= 1 in both entries"):
+        pj.Scene(robot, pj.PAC(), knot_grid=(4, 0))
+    for bad in (4, (4, 3, 2), (4, 2.5), "43"):
+        with pytest.raises(TypeError, match=r"Scene.knot_grid must be"):
+            pj.Scene(robot, pj.PAC(), knot_grid=bad)
     with pytest.raises(ValueError, match=r"Scene.markers\[0\]: segment 1 does not exist"):
         pj.Scene(robot, pj.PAC(), markers=[(1, 0.5)])
     with pytest.raises(ValueError, match=r"Scene.markers\[1\]: s must lie in \[0, 1\]"):

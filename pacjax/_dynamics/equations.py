@@ -56,13 +56,7 @@ class EquationsOfMotion(eqx.Module):
 
     @staticmethod
     def build(scene: Scene, damping: Damping, phi_inertia: float, dtype) -> "EquationsOfMotion":
-        passive = Scene(
-            scene.robot,
-            scene.models,
-            loads=scene.loads,
-            quadrature_points=scene.quadrature_points,
-            rotation_substeps=scene.rotation_substeps,
-        )
+        passive = scene.replace(tendons=(), markers=())
         kd = damping.tendon_gains(scene, dtype) if scene.tendons else None
         return EquationsOfMotion(scene, passive, damping, kd, phi_inertia)
 

@@ -454,10 +454,7 @@ def _fit_errors(evaluation, data: MocapDataset, tip: int, orient: bool) -> FitEr
 
 def _fitted_scene(fitted: Scene, fit_scene: Scene, sites, offsets) -> Scene:
     """The fitted scene: the user's structure (no per-frame loads), fitted marker offsets."""
-    return Scene(
-        fitted.robot,
-        fitted.models,
-        tendons=fitted.tendons,
+    return fitted.replace(
         loads=fit_scene.loads,
         markers=tuple(
             (seg, s, tuple(float(v) for v in off))
@@ -465,4 +462,5 @@ def _fitted_scene(fitted: Scene, fit_scene: Scene, sites, offsets) -> Scene:
         ),
         quadrature_points=fit_scene.quadrature_points,
         rotation_substeps=fit_scene.rotation_substeps,
+        knot_grid=fit_scene.knot_grid,
     )

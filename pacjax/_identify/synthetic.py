@@ -380,15 +380,7 @@ def _kept_frames(template: MocapDataset, keep, measured, orientations) -> MocapD
 
 
 def _with_markers(scene: Scene, sites) -> Scene:
-    return Scene(
-        scene.robot,
-        scene.models,
-        tendons=scene.tendons,
-        loads=scene.loads,
-        markers=sites,
-        quadrature_points=scene.quadrature_points,
-        rotation_substeps=scene.rotation_substeps,
-    )
+    return scene.replace(markers=sites)
 
 
 def _remap_sites(dataset: MocapDataset, coarse: Scene, fine: Scene) -> MocapDataset:

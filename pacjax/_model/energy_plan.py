@@ -91,7 +91,7 @@ class EnergyPlan:
             scene.n_segments,
             np.asarray(self.points.segs, np.int64),
             np.asarray(self.points.s, float),
-            scene.kinematics.min_intervals,
+            scene.kinematics,
         )
         self._robot = scene.robot
         # Tendon chords measured inside their segments when the routing allows it; the load

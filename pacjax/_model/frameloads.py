@@ -104,14 +104,7 @@ def with_frame_loads(
     _check_hook(dataset.frame_values, frame_update)
     # Marker sites are static structure the solver does not need: dropping them lets scenes
     # that differ only in their markers share one compiled solver.
-    new = Scene(
-        scene.robot,
-        scene.models,
-        tendons=scene.tendons,
-        loads=loads,
-        quadrature_points=scene.quadrature_points,
-        rotation_substeps=scene.rotation_substeps,
-    )
+    new = scene.replace(loads=loads, markers=())
     update = FrameLoads(
         mass_index,
         force_index,

@@ -366,7 +366,7 @@ class _KnotMasses(NamedTuple):
 
 def _knot_masses(scene: Scene, dtype) -> _KnotMasses:
     ((segs, s, masses, moments),) = inertia_sites(scene, dtype)
-    knots = Knots(scene.n_segments, segs, s, scene.kinematics.min_intervals)
+    knots = Knots(scene.n_segments, segs, s, scene.kinematics)
     size = knots.s.size
     # Points at one knot (a segment's end mass and a payload there) add up.
     return _KnotMasses(

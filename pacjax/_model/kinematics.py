@@ -15,6 +15,8 @@ Two evaluation paths share these rules:
   chained by a short scan; the position is the cumulative sum of a 4-point Gauss-Legendre rule
   per interval (error ~1e-9 relative even at 2 pi of bending per segment). Each point costs about
   four exponentials whatever its ``s``, and points shared by several tendons are evaluated once.
+  The grid, ``(8, 4)`` here, is the scene's :attr:`~pacjax.Scene.knot_grid`; the dynamics take a
+  coarser one at their default tolerances (:data:`pacjax.dynamics.KNOT_GRID`).
 - **Traced points** (``s`` only known at run time): ``[0, s]`` is cut in the same number of even
   intervals and integrated by the same rules, from the segment's base.
 
@@ -38,24 +40,30 @@ _C2 = 0.5 + math.sqrt(3.0) / 6.0
 _MAGNUS_COMMUTATOR = math.sqrt(3.0) / 12.0
 
 
-# Knot path: at least this many intervals per segment, and Gauss-Legendre nodes per interval.
-_MIN_INTERVALS = 8
-_INTERVAL_NODES = 4
+#: The knot path's default grid: at least this many intervals per segment, and Gauss-Legendre
+#: position nodes per interval (positions to round-off: see the module's docstring).
+KNOT_GRID = (8, 4)
 # Knots closer than this (in s) are merged.
 _KNOT_MERGE = 1e-12
 
 
 class KinematicsConfig:
-    """Static settings of the kinematics (part of a scene's structure)."""
+    """Static settings of the kinematics (part of a scene's structure): Magnus sub-steps per
+    segment, and the knot grid ``(intervals, nodes)`` (:data:`KNOT_GRID` by default)."""
 
-    __slots__ = ("rotation_substeps",)
+    __slots__ = ("rotation_substeps", "grid")
 
-    def __init__(self, rotation_substeps: int):
+    def __init__(self, rotation_substeps: int, grid: tuple[int, int] = KNOT_GRID):
         self.rotation_substeps = rotation_substeps
+        self.grid = grid
 
     @property
     def min_intervals(self) -> int:
-        return max(_MIN_INTERVALS, self.rotation_substeps)
+        return max(self.grid[0], self.rotation_substeps)
+
+    @property
+    def interval_nodes(self) -> int:
+        return self.grid[1]
 
 
 def _magnus_step(model: StrainModel, q, a, h):
@@ -81,7 +89,9 @@ def local_frame(
     curled by 9.5 rad an 8-point rule misplaces a site by 0.14 m).
     """
     knots = s * jnp.linspace(0.0, 1.0, config.min_intervals + 1, dtype=q.dtype)
-    rots, positions, _ = segment_knot_frames(model, q, length, knots)
+    rots, positions, _ = segment_knot_frames(
+        model, q, length, knots, interval_nodes=config.interval_nodes
+    )
     return rots[-1], positions[-1]
 
 
@@ -214,7 +224,8 @@ class Knots:
     (empty intervals); ``flat_index`` is each requested point's index in the flattened grid.
     """
 
-    def __init__(self, n_segments: int, segments, s, min_intervals: int):
+    def __init__(self, n_segments: int, segments, s, config: KinematicsConfig):
+        min_intervals = config.min_intervals
         segments = np.asarray(segments, np.int64).reshape(-1)
         s = np.asarray(s, float).reshape(-1)
         rows = []
@@ -235,7 +246,8 @@ class Knots:
         for k, (i, v) in enumerate(zip(segments, s, strict=True)):
             index[k] = i * self.width + int(np.argmin(np.abs(rows[i] - v)))
         self.flat_index = index
-        nodes, _ = gauss_legendre(_INTERVAL_NODES)
+        self.interval_nodes = config.interval_nodes
+        nodes, _ = gauss_legendre(self.interval_nodes)
         lo = self.s[:, :-1, None]
         self.node_s = lo + (self.s[:, 1:, None] - lo) * nodes  # (n, intervals, nodes)
         self.runs = index_runs(index)
@@ -251,8 +263,11 @@ def segment_knot_frames(
     length: Float[Array, ""],
     knots: Float[Array, " k"],
     node_weights: Float[Array, "i n"] | None = None,
+    *,
+    interval_nodes: int,
 ) -> tuple[Float[Array, "k 3 3"], Float[Array, "k 3"], Float[Array, "3"] | None]:
-    """Rotations and positions (m) at the knots of one segment, in its base frame.
+    """Rotations and positions (m) at the knots of one segment, in its base frame, the
+    positions by ``interval_nodes`` Gauss-Legendre nodes per interval.
 
     With ``node_weights`` ``W(s)`` at the position nodes (:attr:`Knots.node_s`), also the
     weighted tangent integral ``(L + dL) int_0^1 W(s) R(s) e_z ds``.
@@ -260,7 +275,7 @@ def segment_knot_frames(
     dtype = q.dtype
     a = knots[:-1]
     h = knots[1:] - a
-    nodes, weights = gauss_legendre(_INTERVAL_NODES)
+    nodes, weights = gauss_legendre(interval_nodes)
     nodes = jnp.asarray(nodes, dtype)
     n_int = a.shape[0]
     s_nodes = a[:, None] + h[:, None] * nodes[None, :]
@@ -316,12 +331,12 @@ def has_plane_derivatives(model: StrainModel) -> bool:
     return model.plane_angle_basis(np.zeros(1)) is not None
 
 
-def _plane_points(model, q, knots):
+def _plane_points(model, q, knots, interval_nodes: int):
     """The bending angles and their bases at the knots and at the position nodes."""
     dtype = q.dtype
     a = knots[:-1]
     h = knots[1:] - a
-    nodes, weights = gauss_legendre(_INTERVAL_NODES)
+    nodes, weights = gauss_legendre(interval_nodes)
     s_nodes = a[:, None] + h[:, None] * jnp.asarray(nodes, dtype)[None, :]
     return (
         (model.bending_angle(q, knots), model.plane_angle_basis(knots)),
@@ -355,6 +370,8 @@ def segment_knot_jacobian(
     length: Float[Array, ""],
     knots: Float[Array, " k"],
     node_weights: Float[Array, "i n"] | None = None,
+    *,
+    interval_nodes: int,
 ):
     """:func:`segment_knot_frames` and its Jacobian along ``q`` (``(jacobian, value)``, the
     layout of ``jax.jacfwd(..., has_aux=True)``) for a model whose frames depend on ``q``
@@ -363,7 +380,9 @@ def segment_knot_jacobian(
     differentiated point by point along ``(theta, phi)`` alone; the positions are linear in the
     tangents and proportional to the segment's length ``L + dL``."""
     phi = q[-2]
-    (theta_k, basis_k), (theta_n, basis_n), h, weights = _plane_points(model, q, knots)
+    (theta_k, basis_k), (theta_n, basis_n), h, weights = _plane_points(
+        model, q, knots, interval_nodes
+    )
 
     knot_jet, node_jet = _knots_and_nodes(model, theta_k, theta_n, phi, order=1)
     rots, d_rot = knot_jet[0], jnp.stack(knot_jet[1:], axis=-1)
@@ -397,6 +416,8 @@ def segment_knot_curvature(
     knots: Float[Array, " k"],
     node_weights: Float[Array, "i n"] | None,
     lam: tuple,
+    *,
+    interval_nodes: int,
 ) -> Float[Array, "d d"]:
     """Hessian along ``q`` of ``lam . segment_knot_frames(q)`` (``lam`` a cotangent of its
     value: rotations, positions, weighted tangent integral) for the models of
@@ -405,7 +426,9 @@ def segment_knot_curvature(
     Hessians at the points, mapped through ``(theta, phi)(q)`` (linear)."""
     lam_rot, lam_pos, lam_moment = lam
     phi = q[-2]
-    (theta_k, basis_k), (theta_n, basis_n), h, weights = _plane_points(model, q, knots)
+    (theta_k, basis_k), (theta_n, basis_n), h, weights = _plane_points(
+        model, q, knots, interval_nodes
+    )
     w = jnp.asarray(weights, q.dtype)
     # Interval j's tangents reach every knot after it: beta = h w (sum_{k > j} lam_pos_k + W nu).
     beyond = jnp.cumsum(lam_pos[::-1], axis=0)[::-1][1:]
@@ -449,7 +472,9 @@ def knot_frames(
     ``node_weights``, each segment's weighted tangent integral in the world frame."""
     grid = jnp.asarray(knots.s, q.dtype)
     rot, pos, moment = jax.vmap(
-        lambda qi, li, ki, wi: segment_knot_frames(model, qi, li, ki, wi),
+        lambda qi, li, ki, wi: segment_knot_frames(
+            model, qi, li, ki, wi, interval_nodes=knots.interval_nodes
+        ),
     )(q, lengths, grid, node_weights)
     base_rot, base_pos = chain_segments(rot[:, -1], pos[:, -1], base_rotation, base_position)
     world_rot = matmul3(base_rot[:, None], rot)

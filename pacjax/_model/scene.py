@@ -17,6 +17,7 @@ from .channels import ChannelRouting, segment_channel_parts
 from .energy import elastic_energy, mass_beyond, moment_cotangent, robot_section_stiffness
 from .energy_plan import EnergyPlan
 from .kinematics import (
+    KNOT_GRID,
     KinematicsConfig,
     Knots,
     PointLayout,
@@ -35,7 +36,7 @@ from .load_energy import load_energy
 from .loads import Gravity, PointForce, PointMoment
 from .robot import Robot
 from .rotation import matvec3
-from .scene_fields import check_fields, count_of, sequence_of
+from .scene_fields import check_fields, count_of, grid_of, sequence_of
 from .sites import normalise_sites
 from .strain import StrainModel
 from .tendons import Tendon, TendonRouting, segment_tendon_parts, tendon_tensions
@@ -80,6 +81,11 @@ class Scene(eqx.Module):
             energies and the lengths of continuous tendon channels (positions and the weight
             are integrated on the kinematics' knots, :mod:`pacjax._model.kinematics`).
         rotation_substeps: Magnus sub-steps per segment (default: exact for the model).
+        knot_grid: ``(intervals, nodes)``: the knot path (:mod:`pacjax._model.kinematics`)
+            cuts each segment into at least ``intervals`` intervals and integrates the
+            positions with ``nodes`` Gauss-Legendre points in each. Default ``None``:
+            ``(8, 4)``, positions to round-off; :func:`pacjax.simulate` at its default
+            tolerances takes ``(4, 3)`` (:data:`pacjax.dynamics.KNOT_GRID`) instead.
     """
 
     robot: Robot
@@ -90,6 +96,7 @@ class Scene(eqx.Module):
     markers: tuple = eqx.field(static=True, default=())
     quadrature_points: int = eqx.field(static=True, default=8)
     rotation_substeps: int | None = eqx.field(static=True, default=None)
+    knot_grid: tuple[int, int] | None = eqx.field(static=True, default=None)
 
     def __init__(
         self,
@@ -100,6 +107,7 @@ class Scene(eqx.Module):
         markers=(),
         quadrature_points=8,
         rotation_substeps=None,
+        knot_grid=None,
     ):
         if not isinstance(robot, Robot):
             raise TypeError(f"Scene.robot must be a Robot, got {type(robot).__name__}")
@@ -114,6 +122,7 @@ class Scene(eqx.Module):
             if rotation_substeps is None
             else count_of("Scene.rotation_substeps", rotation_substeps)
         )
+        self.knot_grid = None if knot_grid is None else grid_of("Scene.knot_grid", knot_grid)
 
     def __check_init__(self):
         check_fields(self)
@@ -168,10 +177,25 @@ class Scene(eqx.Module):
         """True when every load derives from the potential energy (no follower force, no moment)."""
         return not (self.loads_of(PointForce, follower=True) or self.loads_of(PointMoment))
 
+    def replace(self, **changes) -> "Scene":
+        """A copy of the scene with some of the constructor's arguments changed."""
+        args = dict(
+            robot=self.robot,
+            model=self.model if self.segment_models is None else self.segment_models,
+            tendons=self.tendons,
+            loads=self.loads,
+            markers=self.markers,
+            quadrature_points=self.quadrature_points,
+            rotation_substeps=self.rotation_substeps,
+            knot_grid=self.knot_grid,
+        )
+        args.update(changes)
+        return Scene(**args)
+
     @property
     def kinematics(self) -> KinematicsConfig:
         substeps = self.rotation_substeps or self.model.exact_rotation_substeps()
-        return KinematicsConfig(substeps)
+        return KinematicsConfig(substeps, self.knot_grid or KNOT_GRID)
 
     def coordinates(self, q: Float[Array, " n_dofs"]) -> Float[Array, "n d"]:
         """Flat coordinates as a (segments, :attr:`dofs_per_segment`) matrix, pinned ones 0."""
@@ -253,7 +277,7 @@ class Scene(eqx.Module):
     def _knot_frames(self, q, segment: np.ndarray, s: np.ndarray):
         """Frames at points with concrete ``s`` (the knot path of
         :mod:`pacjax._model.kinematics`)."""
-        knots = Knots(self.n_segments, segment, s, self.kinematics.min_intervals)
+        knots = Knots(self.n_segments, segment, s, self.kinematics)
         rot, pos = self.knot_grid_frames(q, knots)
         return knots.select(rot), knots.select(pos)
 
@@ -378,7 +402,14 @@ class Scene(eqx.Module):
 
     def _segment_frames(self, qi, length, knots, node_weights):
         """One segment's knot frames and weighted tangent integral in its base frame."""
-        return segment_knot_frames(self.model, qi, length, knots, node_weights)
+        return segment_knot_frames(
+            self.model,
+            qi,
+            length,
+            knots,
+            node_weights,
+            interval_nodes=self.kinematics.interval_nodes,
+        )
 
     def segment_frames_jacobian(self, qi, length, knots, node_weights):
         """``(d frames / d qi, frames)`` of :meth:`_segment_frames`: point by point along the
@@ -386,7 +417,14 @@ class Scene(eqx.Module):
         (:func:`pacjax._model.kinematics.segment_knot_jacobian`),
         by forward derivatives otherwise."""
         if has_plane_derivatives(self.model):
-            return segment_knot_jacobian(self.model, qi, length, knots, node_weights)
+            return segment_knot_jacobian(
+                self.model,
+                qi,
+                length,
+                knots,
+                node_weights,
+                interval_nodes=self.kinematics.interval_nodes,
+            )
         return jacobian_and_value(
             lambda y: self._segment_frames(y, length, knots, node_weights), qi
         )
@@ -395,7 +433,15 @@ class Scene(eqx.Module):
         """Hessian along ``qi`` of ``lam . frames(qi)`` (``lam`` a cotangent of
         :meth:`_segment_frames`' value)."""
         if has_plane_derivatives(self.model):
-            return segment_knot_curvature(self.model, qi, length, knots, node_weights, lam)
+            return segment_knot_curvature(
+                self.model,
+                qi,
+                length,
+                knots,
+                node_weights,
+                lam,
+                interval_nodes=self.kinematics.interval_nodes,
+            )
         return jax.hessian(
             lambda y: contract(lam, self._segment_frames(y, length, knots, node_weights))
         )(qi)

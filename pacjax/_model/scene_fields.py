@@ -23,6 +23,16 @@ def count_of(owner: str, value) -> int:
     return int(value)
 
 
+def grid_of(owner: str, value) -> tuple[int, int]:
+    """A pair of positive integers, as a tuple (a static field must hash)."""
+    if isinstance(value, (str, bytes)) or np.ndim(value) != 1 or len(value) != 2:
+        raise TypeError(f"{owner} must be a pair of integers (intervals, nodes), got {value!r}")
+    pair = tuple(count_of(owner, v) for v in value)
+    if min(pair) < 1:
+        raise ValueError(f"{owner} must be >= 1 in both entries, got {pair}")
+    return pair
+
+
 def check_fields(scene) -> None:
     """Raise a TypeError or ValueError naming the first wrong field of ``scene``."""
     if not isinstance(scene.robot, Robot):

@@ -131,6 +131,20 @@ class _Table:
             self.fail(f"expected a list of numbers, got {_describe(value)}", key)
         return [float(v) for v in value]
 
+    def integers(self, key, size: int, minimum=None):
+        value = self.raw(key)
+        if value is _MISSING:
+            return None
+        if not (
+            isinstance(value, list)
+            and len(value) == size
+            and all(isinstance(v, int) and not isinstance(v, bool) for v in value)
+        ):
+            self.fail(f"expected a list of {size} integers, got {_describe(value)}", key)
+        if minimum is not None and min(value) < minimum:
+            self.fail(f"must be >= {minimum} in every entry, got {value}", key)
+        return tuple(value)
+
     def tables(self, key) -> list[_Table]:
         """An array of tables (``[[key]]``), each wrapped; empty when absent."""
         value = self.raw(key)
@@ -262,6 +276,7 @@ def _rebuild(top: _Table, scene: Scene, **changes) -> Scene:
         markers=scene.markers,
         quadrature_points=scene.quadrature_points,
         rotation_substeps=scene.rotation_substeps,
+        knot_grid=scene.knot_grid,
     )
     fields.update(changes)
     return top.build(Scene, scene.robot, scene.models, **fields)
@@ -287,6 +302,8 @@ def _read_model(t: _Table | None, source: str, family=None):
         numerics["quadrature_points"] = t.integer("quadrature_points", minimum=1)
     if t.has("rotation_substeps"):
         numerics["rotation_substeps"] = t.integer("rotation_substeps", minimum=1)
+    if t.has("knot_grid"):
+        numerics["knot_grid"] = t.integers("knot_grid", size=2, minimum=1)
     t.finish()
     return model, numerics
 
@@ -345,7 +362,10 @@ def _read_segments(top: _Table, default_model) -> tuple[list[Segment], list]:
                 default_model,
             )
             if numerics:
-                t.fail("quadrature_points and rotation_substeps belong in [model]", "model")
+                t.fail(
+                    "quadrature_points, rotation_substeps and knot_grid belong in [model]",
+                    "model",
+                )
         common = dict(
             radius_tip=t.number("radius_tip"),
             inner_radius=t.number("inner_radius", 0.0),

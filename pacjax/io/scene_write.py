@@ -30,6 +30,8 @@ def _model_table(scene: Scene) -> dict:
         out["quadrature_points"] = scene.quadrature_points
     if scene.rotation_substeps is not None:
         out["rotation_substeps"] = scene.rotation_substeps
+    if scene.knot_grid is not None:
+        out["knot_grid"] = list(scene.knot_grid)
     return out
 
 

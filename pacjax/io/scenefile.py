@@ -23,6 +23,7 @@ before the first table, as TOML puts every later key into the table above it::
     # twist = false              # PolynomialCurvature: add a torsion strain polynomial
     quadrature_points = 8        # Gauss-Legendre points per segment (optional)
     # rotation_substeps = 4      # Magnus sub-steps per segment (optional)
+    # knot_grid = [8, 4]         # at least 8 intervals a segment, 4 position nodes each (optional)
 
     [[segments]]
     length = 0.1354              # m
