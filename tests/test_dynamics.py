@@ -237,17 +237,22 @@ def test_input_validation():
 
 
 def test_simulations_at_control_tolerances_take_the_dynamics_knot_grid():
-    """At ``rtol >= ROSENBROCK_RTOL`` a scene that sets no knot grid is simulated on
+    """At ``rtol >= ROSENBROCK_RTOL`` a PCC/PAC scene that sets no knot grid is simulated on
     :data:`pacjax.dynamics.KNOT_GRID` (its frames within ``tests/test_kinematics.py``'s bounds
-    of the statics' grid); a reference tolerance, or a grid the scene sets, keeps the scene's."""
+    of the statics' grid), a ``PolynomialCurvature`` one (its rotation by Magnus steps on the
+    intervals) on the statics' intervals with the three nodes; a reference tolerance, or a grid
+    the scene sets, keeps the scene's."""
     from pacjax._dynamics.simulate import ROSENBROCK_RTOL, prepare
 
     def grid(scene, rtol):
         args = (0.0, 0.1, None, pj.Damping(), None, rtol, 1e-6, 100, False, 1e-6, None)
         return prepare(scene, *args)[0].knot_grid
 
-    assert grid(SCENE, dyn.RTOL) == grid(SCENE, ROSENBROCK_RTOL) == dyn.KNOT_GRID == (4, 3)
-    assert grid(SCENE, ROSENBROCK_RTOL / 10) is None
+    pac = pj.presets.stella2023(pj.PAC())
+    assert grid(pac, dyn.RTOL) == grid(pac, ROSENBROCK_RTOL) == dyn.KNOT_GRID == (4, 3)
+    assert isinstance(SCENE.model, pj.PolynomialCurvature)
+    assert grid(SCENE, dyn.RTOL) == (8, 3)
+    assert grid(pac, ROSENBROCK_RTOL / 10) is grid(SCENE, ROSENBROCK_RTOL / 10) is None
     assert grid(SCENE.replace(knot_grid=(8, 4)), dyn.RTOL) == (8, 4)
 
 

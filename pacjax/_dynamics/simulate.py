@@ -40,6 +40,7 @@ from .._model.inputs import (
     solver_dtype,
     static_load_sites,
 )
+from .._model.kinematics import DEFAULT_KNOT_GRID
 from .._model.scene import Scene
 from .._model.strain import PlanarCurvature
 from .._model.values import concrete
@@ -244,25 +245,28 @@ def prepare(
 
 
 #: The knot grid ``(intervals, nodes)`` (:attr:`pacjax.Scene.knot_grid`) of a simulation at
-#: ``rtol >= ROSENBROCK_RTOL`` on a scene that sets none. The statics' ``(8, 4)`` puts the
-#: positions at round-off, far below what a step error of 1e-5 can see; ``(4, 3)`` places the
-#: paper's robot's frames within 3e-8 m of it while each segment turns by up to 2 rad, and
-#: within 1e-6 m at 4.5 rad (``tests/test_kinematics.py``), with a third less arithmetic in
-#: the vector field. Tighter tolerances (references) keep the scene's grid.
+#: ``rtol >= ROSENBROCK_RTOL`` on a scene of PCC/PAC segments that sets none. The statics'
+#: ``(8, 4)`` puts the positions at round-off, far below what a step error of 1e-5 can see;
+#: ``(4, 3)`` places the paper's robot's frames within 3e-8 m of it while each segment turns
+#: by up to 2 rad, and within 1e-6 m at 4.5 rad (``tests/test_kinematics.py``), with a third
+#: less arithmetic in the vector field. ``PolynomialCurvature``, whose rotation is integrated
+#: by Magnus steps on the intervals (not in closed form), keeps the statics' intervals and
+#: takes the three nodes only. Tighter tolerances (references) keep the scene's grid.
 KNOT_GRID = (4, 3)
 
 
 def _dynamics_scene(scene: Scene, rtol: float) -> Scene:
     """``scene`` as the dynamics evaluate it: PCC/PAC models taking sines and cosines as fused
-    arithmetic (:mod:`pacjax._model.trig`), and at the default tolerances the knot grid
-    :data:`KNOT_GRID` unless the scene sets one. A simulation evaluates its vector field
+    arithmetic (:mod:`pacjax._model.trig`), and at the default tolerances a coarser knot grid
+    (:data:`KNOT_GRID`) unless the scene sets one. A simulation evaluates its vector field
     thousands of times, so the program's run time counts for more than its compile time."""
     models = tuple(
         m.with_fused_trig() if isinstance(m, PlanarCurvature) else m for m in scene.models
     )
     grid = scene.knot_grid
     if grid is None and rtol >= ROSENBROCK_RTOL:
-        grid = KNOT_GRID
+        closed_form = all(isinstance(m, PlanarCurvature) for m in scene.models)
+        grid = KNOT_GRID if closed_form else (DEFAULT_KNOT_GRID[0], KNOT_GRID[1])
     if models == scene.models and grid == scene.knot_grid:
         return scene
     return scene.replace(model=models if scene.segment_models else models[0], knot_grid=grid)

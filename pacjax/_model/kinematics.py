@@ -42,18 +42,18 @@ _MAGNUS_COMMUTATOR = math.sqrt(3.0) / 12.0
 
 #: The knot path's default grid: at least this many intervals per segment, and Gauss-Legendre
 #: position nodes per interval (positions to round-off: see the module's docstring).
-KNOT_GRID = (8, 4)
+DEFAULT_KNOT_GRID = (8, 4)
 # Knots closer than this (in s) are merged.
 _KNOT_MERGE = 1e-12
 
 
 class KinematicsConfig:
     """Static settings of the kinematics (part of a scene's structure): Magnus sub-steps per
-    segment, and the knot grid ``(intervals, nodes)`` (:data:`KNOT_GRID` by default)."""
+    segment, and the knot grid ``(intervals, nodes)`` (:data:`DEFAULT_KNOT_GRID` by default)."""
 
     __slots__ = ("rotation_substeps", "grid")
 
-    def __init__(self, rotation_substeps: int, grid: tuple[int, int] = KNOT_GRID):
+    def __init__(self, rotation_substeps: int, grid: tuple[int, int] = DEFAULT_KNOT_GRID):
         self.rotation_substeps = rotation_substeps
         self.grid = grid
 

@@ -17,7 +17,7 @@ from .channels import ChannelRouting, segment_channel_parts
 from .energy import elastic_energy, mass_beyond, moment_cotangent, robot_section_stiffness
 from .energy_plan import EnergyPlan
 from .kinematics import (
-    KNOT_GRID,
+    DEFAULT_KNOT_GRID,
     KinematicsConfig,
     Knots,
     PointLayout,
@@ -85,7 +85,7 @@ class Scene(eqx.Module):
             cuts each segment into at least ``intervals`` intervals and integrates the
             positions with ``nodes`` Gauss-Legendre points in each. Default ``None``:
             ``(8, 4)``, positions to round-off; :func:`pacjax.simulate` at its default
-            tolerances takes ``(4, 3)`` (:data:`pacjax.dynamics.KNOT_GRID`) instead.
+            tolerances takes a coarser one (:data:`pacjax.dynamics.KNOT_GRID`).
     """
 
     robot: Robot
@@ -195,7 +195,7 @@ class Scene(eqx.Module):
     @property
     def kinematics(self) -> KinematicsConfig:
         substeps = self.rotation_substeps or self.model.exact_rotation_substeps()
-        return KinematicsConfig(substeps, self.knot_grid or KNOT_GRID)
+        return KinematicsConfig(substeps, self.knot_grid or DEFAULT_KNOT_GRID)
 
     def coordinates(self, q: Float[Array, " n_dofs"]) -> Float[Array, "n d"]:
         """Flat coordinates as a (segments, :attr:`dofs_per_segment`) matrix, pinned ones 0."""
