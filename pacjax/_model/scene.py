@@ -81,11 +81,9 @@ class Scene(eqx.Module):
             energies and the lengths of continuous tendon channels (positions and the weight
             are integrated on the kinematics' knots, :mod:`pacjax._model.kinematics`).
         rotation_substeps: Magnus sub-steps per segment (default: exact for the model).
-        knot_grid: ``(intervals, nodes)``: the knot path (:mod:`pacjax._model.kinematics`)
-            cuts each segment into at least ``intervals`` intervals and integrates the
-            positions with ``nodes`` Gauss-Legendre points in each. Default ``None``:
-            ``(8, 4)``, positions to round-off; :func:`pacjax.simulate` at its default
-            tolerances takes a coarser one (:data:`pacjax.dynamics.KNOT_GRID`).
+        knot_grid: ``(intervals, nodes)``: at least ``intervals`` knot intervals a segment,
+            ``nodes`` Gauss-Legendre position nodes each (default ``(8, 4)``, round-off;
+            :func:`pacjax.simulate` takes :data:`pacjax.dynamics.KNOT_GRID`).
     """
 
     robot: Robot
@@ -179,18 +177,10 @@ class Scene(eqx.Module):
 
     def replace(self, **changes) -> "Scene":
         """A copy of the scene with some of the constructor's arguments changed."""
-        args = dict(
-            robot=self.robot,
-            model=self.model if self.segment_models is None else self.segment_models,
-            tendons=self.tendons,
-            loads=self.loads,
-            markers=self.markers,
-            quadrature_points=self.quadrature_points,
-            rotation_substeps=self.rotation_substeps,
-            knot_grid=self.knot_grid,
-        )
-        args.update(changes)
-        return Scene(**args)
+        model = self.model if self.segment_models is None else self.segment_models
+        kept = ("robot", "tendons", "loads", "markers", "quadrature_points", "rotation_substeps")
+        args = {k: getattr(self, k) for k in (*kept, "knot_grid")}
+        return Scene(**(args | {"model": model} | changes))
 
     @property
     def kinematics(self) -> KinematicsConfig:
@@ -417,13 +407,9 @@ class Scene(eqx.Module):
         (:func:`pacjax._model.kinematics.segment_knot_jacobian`),
         by forward derivatives otherwise."""
         if has_plane_derivatives(self.model):
+            nodes = self.kinematics.interval_nodes
             return segment_knot_jacobian(
-                self.model,
-                qi,
-                length,
-                knots,
-                node_weights,
-                interval_nodes=self.kinematics.interval_nodes,
+                self.model, qi, length, knots, node_weights, interval_nodes=nodes
             )
         return jacobian_and_value(
             lambda y: self._segment_frames(y, length, knots, node_weights), qi
@@ -433,14 +419,9 @@ class Scene(eqx.Module):
         """Hessian along ``qi`` of ``lam . frames(qi)`` (``lam`` a cotangent of
         :meth:`_segment_frames`' value)."""
         if has_plane_derivatives(self.model):
+            nodes = self.kinematics.interval_nodes
             return segment_knot_curvature(
-                self.model,
-                qi,
-                length,
-                knots,
-                node_weights,
-                lam,
-                interval_nodes=self.kinematics.interval_nodes,
+                self.model, qi, length, knots, node_weights, lam, interval_nodes=nodes
             )
         return jax.hessian(
             lambda y: contract(lam, self._segment_frames(y, length, knots, node_weights))
