@@ -270,16 +270,7 @@ def scene_from_toml(text: str, source: str = "<string>", default_name: str = "sc
 
 
 def _rebuild(top: _Table, scene: Scene, **changes) -> Scene:
-    fields = dict(
-        tendons=scene.tendons,
-        loads=scene.loads,
-        markers=scene.markers,
-        quadrature_points=scene.quadrature_points,
-        rotation_substeps=scene.rotation_substeps,
-        knot_grid=scene.knot_grid,
-    )
-    fields.update(changes)
-    return top.build(Scene, scene.robot, scene.models, **fields)
+    return top.build(scene.replace, **changes)
 
 
 def _read_model(t: _Table | None, source: str, family=None):
