@@ -18,7 +18,7 @@ from pacjax._dynamics.equations import (
     vector_field,
     vector_field_jacobian,
 )
-from pacjax._dynamics.rosenbrock import Rosenbrock23, forward_differences, secant_update
+from pacjax._dynamics.rosenbrock import Rosenbrock23, secant_update
 from pacjax._model.inertia import mass_matrix
 from pacjax._model.inputs import as_traced_leaves
 
@@ -274,27 +274,43 @@ def test_gradient_through_adaptive_steps_matches_finite_differences():
 
 
 @pytest.mark.slow  # jax.jacfwd of the whole vector field compiles for tens of seconds
-def test_forward_differences_are_the_vector_fields_jacobian():
-    """The held exact Jacobian by forward differences equals ``jax.jacfwd`` of the vector
-    field, in motion with the tendons taut, to the differences' truncation (a few 1e-5 of the
-    largest entries, the tendon springs'), with the vector field at the point given or not."""
+def test_differences_make_the_vector_fields_jacobian():
+    """The exact Jacobian that the solver makes by forward differences, in its loop of vector
+    fields, and holds equals ``jax.jacfwd`` of the vector field, in motion with the tendons taut,
+    to the differences' truncation (a few 1e-5 of the largest entries, the tendon springs'): on
+    the first step, where the loop evaluates the start's vector field too, and on the sixth
+    (``reuse=5``), where that is carried from the step before."""
     scene = as_traced_leaves(SCENE, jnp.float64)
     model = EquationsOfMotion.build(scene, pj.Damping.modal(SCENE), 1e-6, jnp.float64)
     n = scene.n_dofs
     y = (jnp.linspace(0.2, -0.3, n).at[-1].set(-0.002), jnp.linspace(-1.0, 2.0, n))
     args = (model, CONTROLS + 0.004)
+    solver = Rosenbrock23(jacobian="differences", reuse=5, secant=False, autonomous=True)
     x0, unravel = ravel_pytree(y)
+    dt = 1e-6
 
-    def f(x):
-        return ravel_pytree(vector_field(0.0, unravel(x), args))[0]
+    @jax.jit
+    def made_and_exact(steps):
+        # The state where the last step began, and the Jacobian held after it (made there).
+        sol = diffrax.diffeqsolve(
+            diffrax.ODETerm(vector_field),
+            solver,
+            0.0,
+            steps * dt,
+            dt,
+            y,
+            args,
+            stepsize_controller=diffrax.ConstantStepSize(),
+            saveat=diffrax.SaveAt(ts=[(steps - 1) * dt], solver_state=True),
+        )
+        start = ravel_pytree(jax.tree.map(lambda leaf: leaf[0], sol.ys))[0]
+        exact = jax.jacfwd(lambda x: ravel_pytree(vector_field(0.0, unravel(x), args))[0])(start)
+        return sol.solver_state[1], exact
 
-    differences = jax.jit(lambda x: forward_differences(f, x, f(x)))(x0)
-    exact = jax.jit(jax.jacfwd(f))(x0)
-    scale = float(jnp.abs(exact).max())
-    np.testing.assert_allclose(differences, exact, rtol=1e-4, atol=1e-6 * scale)
-    # Where the vector field at x is not given, the loop evaluates it as its first point.
-    own = jax.jit(lambda x: forward_differences(f, x))(x0)
-    np.testing.assert_allclose(own, exact, rtol=1e-4, atol=1e-6 * scale)
+    for steps in (1, 6):
+        made, exact = made_and_exact(steps)
+        scale = float(jnp.abs(exact).max())
+        np.testing.assert_allclose(made, exact, rtol=1e-4, atol=1e-6 * scale)
 
 
 def test_plane_angle_weights_follow_the_bends():

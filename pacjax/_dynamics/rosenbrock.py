@@ -34,10 +34,15 @@ solver state meanwhile. On one trajectory that makes an exact Jacobian (dear: on
 per state coordinate) affordable. Under ``vmap`` the rows make their Jacobians together: when
 any row still stepping needs one, every row makes one and restarts its count (a choice by each
 row's own flag would be a ``vmap``-ped select, which makes it every step). A row then takes
-slightly different steps than alone, never fewer fresh Jacobians. With reuse the first step also
-evaluates ``F0`` itself, in the loop that evaluates its stages (the compiled program then holds
-two copies of the vector field, the stages' and the differences', not three: XLA compiles each
-copy anew); under ``vmap`` it is made when any row needs it.
+slightly different steps than alone, never fewer fresh Jacobians.
+
+XLA compiles each copy of the vector field in a program anew, and on pacjax's dynamics each
+copy is several seconds of a first simulation's compile time. A step therefore evaluates every
+vector field it needs in one loop, one pass each: ``F0`` where it is not known (the first step,
+after a jump; under ``vmap`` when any row needs it), the Jacobian's forward differences where
+one is made (one pass a column, from ``F0``), then the two stages'. Passes with nothing to do
+are skipped, so a step with a held Jacobian runs two vector fields, and the program holds one
+copy.
 
 A held ``J`` ages as the state moves, and the error estimate feels it: with ``J`` not the
 Jacobian the estimate's leading term is of second order, ``(J - df/dy)`` applied along the
@@ -76,8 +81,8 @@ class Rosenbrock23(diffrax.AbstractAdaptiveSolver):
         jacobian: ``(t, y, args) -> J``, the ``(n, n)`` Jacobian (or a W-method's stand-in for
             it) of the vector field along the flattened state (``jax.flatten_util.ravel_pytree``
             order). None: the exact one, by forward-mode differentiation of the vector field.
-            ``"differences"``: the exact one by forward differences
-            (:func:`forward_differences`), one vector field per state coordinate.
+            ``"differences"``: the exact one by forward differences, one vector field per state
+            coordinate (steps: :func:`difference_steps`), in the step's loop of vector fields.
         autonomous: the vector field does not depend on ``t`` (constant controls), so ``T`` is
             zero. Its forward derivative in ``t`` is then left out: it traced the whole vector
             field once more per step.
@@ -133,14 +138,12 @@ class Rosenbrock23(diffrax.AbstractAdaptiveSolver):
     def func(self, terms, t0, y0, args):
         return terms.vf(t0, y0, args)
 
-    def _jacobian(self, t, y, args, f, f0):
-        """The Jacobian at ``(t, y)``; ``f0`` the vector field there, or None where it is not
-        known yet (differences then evaluate it too)."""
-        x, _ = ravel_pytree(y)
+    def _given_jacobian(self, t, y, args, f):
+        """The Jacobian at ``(t, y)`` where it is not made by differences (those are columns
+        of the step's loop of vector fields)."""
         if self.jacobian is None:
+            x, _ = ravel_pytree(y)
             return jax.jacfwd(lambda z: f(t, z))(x)
-        if self.jacobian == "differences":
-            return forward_differences(lambda z: f(t, z), x, f0)
         return self.jacobian(t, y, args)
 
     def step(self, terms, t0, t1, y0, args, solver_state, made_jump):
@@ -150,15 +153,13 @@ class Rosenbrock23(diffrax.AbstractAdaptiveSolver):
             return ravel_pytree(terms.vf(t, unravel(x), args))[0]
 
         h = t1 - t0
+        differences = self.jacobian == "differences"
         if self.reuse == 1:
-            f0_tree, held, age, known = solver_state, None, None, True
-            if made_jump is not False:  # resolved when traced: no second copy of the vector field
-                f0_tree = jax.lax.cond(made_jump, lambda: terms.vf(t0, y0, args), lambda: f0_tree)
-            jac = self._jacobian(t0, y0, args, f, ravel_pytree(f0_tree)[0])
+            f0_tree, held, age, fresh = solver_state, None, None, True
+            # ``known is True`` resolves when traced: no start's vector field in the loop.
+            known = True if made_jump is False else ~jnp.asarray(made_jump)
+            jac = None if differences else self._given_jacobian(t0, y0, args, f)
         else:
-            # The vector field at the start is evaluated in the loop of stages below where it
-            # is not known (the first step, after a jump), so that the program holds no copy of
-            # it outside the step; the differences evaluate it for themselves.
             f0_tree, held, age, known = solver_state
             known = known & ~jnp.asarray(made_jump)
             fresh = (age >= self.reuse) | jnp.asarray(made_jump)
@@ -166,9 +167,15 @@ class Rosenbrock23(diffrax.AbstractAdaptiveSolver):
             # needs one (a finished row steps from its end to its end): a choice by each row's
             # own flag would be a select, both sides every step.
             fresh = eqxi.unvmap_any(fresh & (t1 > t0))
-            jac = jax.lax.cond(fresh, lambda: self._jacobian(t0, y0, args, f, None), lambda: held)
+            if differences:
+                jac = held
+            else:
+                jac = jax.lax.cond(
+                    fresh, lambda: self._given_jacobian(t0, y0, args, f), lambda: held
+                )
             age = jnp.where(fresh, 0, age) + 1
-        f0_known = ravel_pytree(f0_tree)[0]
+        if jac is None:
+            jac = jnp.zeros((x0.size, x0.size), x0.dtype)
         # Neither W nor T carry gradients: the step's derivative is that of the method with W
         # held fixed, a W-method's own (diffrax's implicit solvers stop them the same way).
         jac = jax.lax.stop_gradient(jac)
@@ -177,45 +184,73 @@ class Rosenbrock23(diffrax.AbstractAdaptiveSolver):
         else:
             rate = jax.jvp(lambda t: f(t, x0), (t0,), (jnp.ones_like(t0),))[1]
             rate = jax.lax.stop_gradient(rate)
-        lu = jax.scipy.linalg.lu_factor(jnp.eye(x0.size, dtype=x0.dtype) - (h * _D) * jac)
-
-        def solve(b):
-            return jax.scipy.linalg.lu_solve(lu, b)
-
         hdt = (h * _D) * rate
+        f0_known = ravel_pytree(f0_tree)[0]
+        columns = x0.size if differences else 0
+        steps = difference_steps(x0)
+        eye = jnp.eye(x0.size, dtype=x0.dtype)
 
-        def stage(carry, i):
-            # The vector fields of a step as one loop (the start's where it is not known, then
-            # the two new ones), so that the compiled program holds one copy of the vector
-            # field for them: XLA compiles each copy anew.
-            f0, k1, k2, f1 = carry
-            x = x0 + jnp.select([i == 1, i == 2], [(0.5 * h) * k1, h * k2], jnp.zeros_like(x0))
-            t = t0 + jnp.select([i == 1, i == 2], [0.5 * h, h], 0.0 * h)
-            if known is True:
-                fx = f(t, x)
-            else:
-                need = (i > 0) | ~known
-                fx = jax.lax.cond(eqxi.unvmap_any(need), lambda: f(t, x), lambda: f0_known)
-                fx = jnp.where(need, fx, f0_known)
-            f0 = jnp.where(i == 0, fx, f0)
-            rhs = jnp.select(
-                [i == 0, i == 1],
-                [f0 + hdt, fx - k1],
-                fx - _E32 * (k2 - f1) - 2.0 * (k1 - f0) + hdt,
+        # Every vector field of a step is one pass of one loop, so that the compiled program
+        # holds one copy of the vector field (XLA compiles each copy anew): the start's where
+        # it is not known (the first step, after a jump), the Jacobian's differences where one
+        # is made, then the two stages'. A pass makes its point, evaluates the vector field
+        # there, and takes what it gives; a pass with nothing to do is skipped. ``lu`` is
+        # ``W``'s factorisation, made before the first stage.
+        def point(phase, i, c):
+            def start(c):
+                return t0, x0, c
+
+            def difference(c):
+                return t0, x0.at[i - 1].add(steps[i - 1]), c
+
+            def first_stage(c):
+                lu = jax.scipy.linalg.lu_factor(eye - (h * _D) * c["jac"])
+                k1 = jax.scipy.linalg.lu_solve(lu, c["f0"] + hdt)
+                return t0 + 0.5 * h, x0 + (0.5 * h) * k1, dict(c, lu=lu, k1=k1)
+
+            def second_stage(c):
+                k2 = jax.scipy.linalg.lu_solve(c["lu"], c["f1"] - c["k1"]) + c["k1"]
+                return t1, x0 + h * k2, dict(c, k2=k2)
+
+            return jax.lax.switch(phase, [start, difference, first_stage, second_stage], c)
+
+        def take(phase, i, fx, c):
+            def start(c):
+                return dict(c, f0=jnp.where(known, c["f0"], fx))
+
+            def difference(c):
+                column = jax.lax.stop_gradient((fx - c["f0"]) / steps[i - 1])
+                return dict(c, jac=c["jac"].at[:, i - 1].set(column))
+
+            def first_stage(c):
+                return dict(c, f1=fx)
+
+            def second_stage(c):
+                rhs = fx - _E32 * (c["k2"] - c["f1"]) - 2.0 * (c["k1"] - c["f0"]) + hdt
+                return dict(c, f2=fx, k3=jax.scipy.linalg.lu_solve(c["lu"], rhs))
+
+            return jax.lax.switch(phase, [start, difference, first_stage, second_stage], c)
+
+        def one_pass(c, i):
+            phase = jnp.select([i == 0, i <= columns, i == columns + 1], [0, 1, 2], 3)
+            needed = jnp.select(
+                [i == 0, i <= columns],
+                [jnp.asarray(False) if known is True else eqxi.unvmap_any(~known), fresh],
+                True,
             )
-            k = solve(rhs)
-            k1 = jnp.where(i == 0, k, k1)
-            k2 = jnp.where(i == 1, k + k1, k2)
-            f1 = jnp.where(i == 1, fx, f1)
-            return (f0, k1, k2, f1), (k, fx)
+
+            def evaluate(c):
+                t, x, c = point(phase, i, c)
+                return take(phase, i, f(t, x), c)
+
+            return jax.lax.cond(needed, evaluate, lambda c: c, c), None
 
         zero = jnp.zeros_like(x0)
-        if known is True:  # first same as last: the start's vector field is the state's
-            first = (f0_known, solve(f0_known + hdt), zero, zero)
-            (f0, k1, k2, _), (ks, fs) = jax.lax.scan(stage, first, jnp.arange(1, 3))
-        else:
-            (f0, k1, k2, _), (ks, fs) = jax.lax.scan(stage, (zero,) * 4, jnp.arange(3))
-        k3, f2 = ks[-1], fs[-1]
+        lu = (jnp.zeros_like(eye), jnp.zeros(x0.size, jnp.int32))
+        carry = dict(f0=f0_known, jac=jac, lu=lu, k1=zero, k2=zero, f1=zero, f2=zero, k3=zero)
+        passes = jnp.arange(1 if known is True else 0, columns + 3)
+        c, _ = jax.lax.scan(one_pass, carry, passes)
+        f0, k1, k2, k3, f2 = c["f0"], c["k1"], c["k2"], c["k3"], c["f2"]
         x1 = x0 + h * k2
         f2_tree = unravel(f2)
         error = unravel((h / 6.0) * (k1 - 2.0 * k2 + k3))
@@ -226,6 +261,7 @@ class Rosenbrock23(diffrax.AbstractAdaptiveSolver):
         dense_info = dict(y0=y0, y1=y1, k0=unravel(h * f0), k1=unravel(h * f2))
         if held is None:
             return y1, error, dense_info, f2_tree, diffrax.RESULTS.successful
+        jac = c["jac"]
         if self.secant:
             jac = secant_update(jac, x1 - x0, f2 - f0)
         state = (f2_tree, jac, age, jnp.asarray(True))
@@ -240,24 +276,8 @@ def secant_update(jac, dy, df):
     return jac + jnp.outer(df - jac @ dy, dy / jnp.where(norm > 0, norm, 1.0))
 
 
-def forward_differences(f: Callable, x: jax.Array, fx: jax.Array | None = None) -> jax.Array:
-    """The Jacobian of ``f`` at ``x`` (where it is ``fx``; None: evaluated here too, in the same
-    loop) by forward differences, one coordinate at a time (a ``lax.map``: the program holds
-    one more copy of ``f``, where ``jax.jacfwd`` traces its forward derivative, a larger program
-    that compiles for longer).
-
-    Each coordinate's step is the square root of the machine epsilon times its size (at
-    least one), so the truncation is about that relative to the Jacobian's entries; a W-method
-    does not feel it.
-    """
-    steps = jnp.sqrt(jnp.finfo(x.dtype).eps) * jnp.maximum(jnp.abs(x), 1.0)
-    if fx is None:
-        # Row 0 the unmoved point: f(x) from the loop's own copy of f.
-        moved = jnp.concatenate([jnp.zeros((1, x.size), x.dtype), jnp.diag(steps)])
-        values = jax.lax.map(lambda dx: f(x + dx), moved)
-        return ((values[1:] - values[0]) / steps[:, None]).T
-
-    def column(j):
-        return (f(x.at[j].add(steps[j])) - fx) / steps[j]
-
-    return jax.lax.map(column, jnp.arange(x.size)).T
+def difference_steps(x: jax.Array) -> jax.Array:
+    """The forward differences' step in each coordinate of ``x``: the square root of the
+    machine epsilon times its size (at least one), so that the truncation is about that relative
+    to the Jacobian's entries; a W-method does not feel it."""
+    return jax.lax.stop_gradient(jnp.sqrt(jnp.finfo(x.dtype).eps) * jnp.maximum(jnp.abs(x), 1.0))

@@ -392,8 +392,8 @@ def rosenbrock23(jacobian: str = "exact", reuse: int | None = None) -> Rosenbroc
     """:class:`Rosenbrock23` for the dynamics: :func:`simulate`'s solver at moderate tolerances.
 
     Args:
-        jacobian: ``"exact"``: the vector field's Jacobian by differences
-            (:func:`pacjax._dynamics.rosenbrock.forward_differences`), one per ``reuse``
+        jacobian: ``"exact"``: the vector field's Jacobian by forward differences
+            (:class:`Rosenbrock23`'s ``"differences"``), one per ``reuse``
             accepted steps (default :data:`JACOBIAN_REUSE`), corrected along each step between
             them (Broyden's update, :class:`Rosenbrock23`'s ``secant``): dear (a vector field
             per state coordinate) but it holds the inertia's fast part, so the steps are several
