@@ -11,8 +11,11 @@ once before it (the start's plane alignment, the default damping's lowest mode) 
 ``PACJAX_FAST_COMPILE=1`` adds LLVM's optimisation level 0 (``xla_backend_optimization_level``)
 to them: the statics programs then compile in roughly two thirds of the time and run slower
 (``benchmarks/RESULTS.md``, "CI time"), which pays where each program runs a few times (one-off
-solves); the dynamics' long integrations keep the default level. Results differ from the
-default level's in the last bits, which can decide a float32 solve at its round-off floor.
+solves); the dynamics' long integrations keep the default level. The programs that run once
+for each call of the function that needs them (``jit(once=True)``: a simulation's start
+alignment, a scene's default damping) take level 0 always: the start's alignment compiles in
+about half the time and runs in milliseconds either way. Results differ from the default
+level's in the last bits, which can decide a float32 solve at its round-off floor.
 
 The options go to CPU compilations only, are left out where ``XLA_FLAGS`` sets them (the
 user's choice stands), and are dropped when this jaxlib does not know them (checked once, on a
@@ -59,14 +62,16 @@ FAST_COMPILE_OPTIONS = {"xla_backend_optimization_level": 0}
 
 
 @functools.cache
-def compile_options(backend: str) -> tuple[tuple[str, object], ...]:
-    """The options of :data:`CPU_COMPILE_OPTIONS` that apply on ``backend``: none off CPU,
-    none that ``XLA_FLAGS`` sets, none if this jax / jaxlib does not accept them."""
+def compile_options(backend: str, once: bool = False) -> tuple[tuple[str, object], ...]:
+    """The options of :data:`CPU_COMPILE_OPTIONS` (and :data:`FAST_COMPILE_OPTIONS` with
+    ``PACJAX_FAST_COMPILE=1`` or for a program that runs ``once``) that apply on ``backend``:
+    none off CPU, none that ``XLA_FLAGS`` sets, none if this jax / jaxlib does not accept
+    them."""
     if backend != "cpu":
         return ()
     flags = os.environ.get("XLA_FLAGS", "")
     wanted = dict(CPU_COMPILE_OPTIONS)
-    if os.environ.get("PACJAX_FAST_COMPILE", "") not in ("", "0"):
+    if once or os.environ.get("PACJAX_FAST_COMPILE", "") not in ("", "0"):
         wanted.update(FAST_COMPILE_OPTIONS)
     options = {k: v for k, v in wanted.items() if f"--{k}=" not in flags}
     if not options:
@@ -83,12 +88,18 @@ def _top_level() -> bool:
     return _TOP_LEVEL is not None and get_opaque_trace_state() == _TOP_LEVEL
 
 
-def jit(fn):
+def jit(fn=None, *, once: bool = False):
     """``equinox.filter_jit(fn)``; a top-level call compiles with :func:`compile_options` of
     the default backend (decided at the first call, not at import, so that the backend can
     still be chosen after ``import pacjax``). With the compilation cache on, a top-level call
     loads its traced program from disk where an earlier process stored it
-    (:mod:`pacjax._stored`)."""
+    (:mod:`pacjax._stored`).
+
+    ``once``: the program runs once for each call of the function that needs it (a
+    simulation's start, a scene's default damping), so its compile time is all it costs: it
+    takes :data:`FAST_COMPILE_OPTIONS` whatever ``PACJAX_FAST_COMPILE`` says."""
+    if fn is None:
+        return functools.partial(jit, once=once)
     plain = eqx.filter_jit(fn)
     lock = threading.Lock()
     jitted = {}
@@ -98,7 +109,7 @@ def jit(fn):
         if not _top_level():
             return plain(*args, **kwargs)
         backend = jax.default_backend()
-        options = dict(compile_options(backend))
+        options = dict(compile_options(backend, once))
         out = call_stored(fn, options, args, kwargs)
         if out is not NotImplemented:
             return out

@@ -28,9 +28,13 @@ def test_options_apply_on_cpu_unless_xla_flags_sets_them_or_xla_lacks_them(
     monkeypatch.setenv("PACJAX_FAST_COMPILE", "1")
     fast = _jit.CPU_COMPILE_OPTIONS | _jit.FAST_COMPILE_OPTIONS
     assert dict(_jit.compile_options("cpu")) == fast
+    monkeypatch.delenv("PACJAX_FAST_COMPILE")
+    assert dict(_jit.compile_options("cpu", once=True)) == fast  # a program run once
+    monkeypatch.setenv("PACJAX_FAST_COMPILE", "1")
     _jit.compile_options.cache_clear()
     monkeypatch.setenv("XLA_FLAGS", "--xla_backend_optimization_level=2")
     assert dict(_jit.compile_options("cpu")) == _jit.CPU_COMPILE_OPTIONS  # the user's level
+    assert dict(_jit.compile_options("cpu", once=True)) == _jit.CPU_COMPILE_OPTIONS
     monkeypatch.delenv("PACJAX_FAST_COMPILE")
     assert _jit.compile_options("gpu") == ()
     _jit.compile_options.cache_clear()
@@ -62,6 +66,14 @@ def test_options_only_on_top_level_calls_and_the_same_result(fresh_options, monk
     f(x)
     monkeypatch.undo()
     assert seen == [None, _jit.CPU_COMPILE_OPTIONS]  # made at the first top-level call
+    seen.clear()
+    monkeypatch.delenv("XLA_FLAGS", raising=False)
+    monkeypatch.delenv("PACJAX_FAST_COMPILE", raising=False)
+    monkeypatch.setattr(_jit.eqx, "filter_jit", spy)
+    once = _jit.jit(once=True)(lambda x: jnp.sin(x) * x)
+    np.testing.assert_allclose(once(x), top, rtol=1e-15)
+    monkeypatch.undo()
+    assert seen == [None, _jit.CPU_COMPILE_OPTIONS | _jit.FAST_COMPILE_OPTIONS]
     np.testing.assert_allclose(jax.jit(f)(x), top, rtol=1e-15)
     np.testing.assert_allclose(jax.vmap(f)(x), top, rtol=1e-15)
     np.testing.assert_allclose(jax.grad(lambda x: f(x).sum())(x), jnp.sin(x) + x * jnp.cos(x))

@@ -19,6 +19,7 @@ from pacjax._dynamics.equations import (
     vector_field_jacobian,
 )
 from pacjax._dynamics.rosenbrock import Rosenbrock23, secant_update
+from pacjax._dynamics.simulate import step_loop
 from pacjax._model.inertia import mass_matrix
 from pacjax._model.inputs import as_traced_leaves
 
@@ -271,6 +272,69 @@ def test_gradient_through_adaptive_steps_matches_finite_differences():
     fd = float((end(mu + h) - end(mu - h)) / (2 * h))
     assert abs(fd) > 1e-3
     assert abs(grad - fd) < 1e-6 * abs(fd)
+
+
+def test_each_form_of_the_step_loop_solves_and_differentiates_alike():
+    """The step's loop of vector fields as a checkpointed while loop (reverse mode), a plain one
+    (forward mode) and a scan over every pass (either): the same steps, and the same derivative
+    of ``x(2)`` in mu by the first in reverse mode and the second in forward mode (van der Pol,
+    mu = 20, differences made every fifth step, so that the loops skip the differences' passes
+    between)."""
+
+    def end(mu, loop, adjoint):
+        return diffrax.diffeqsolve(
+            diffrax.ODETerm(_van_der_pol),
+            Rosenbrock23(jacobian="differences", reuse=5, loop=loop),
+            0.0,
+            2.0,
+            None,
+            (jnp.array(2.0), jnp.array(0.0)),
+            args=mu,
+            stepsize_controller=diffrax.PIDController(rtol=1e-6, atol=1e-8),
+            adjoint=adjoint,
+        )
+
+    mu = jnp.asarray(20.0)
+    reverse, forward = diffrax.RecursiveCheckpointAdjoint(), diffrax.ForwardMode()
+    sols = {loop: end(mu, loop, reverse) for loop in ("checkpointed", "lax", "scan")}
+    for sol in sols.values():
+        assert sol.result == diffrax.RESULTS.successful
+        assert int(sol.stats["num_steps"]) == int(sols["scan"].stats["num_steps"]) > 10
+        np.testing.assert_allclose(sol.ys[0], sols["scan"].ys[0], rtol=1e-12)
+    backward = float(jax.grad(lambda m: end(m, "checkpointed", reverse).ys[0][-1])(mu))
+    onward = float(jax.jacfwd(lambda m: end(m, "lax", forward).ys[0][-1])(mu))
+    assert abs(backward) > 1e-3
+    assert onward == pytest.approx(backward, rel=1e-10)
+    with pytest.raises(ValueError, match="loop"):
+        Rosenbrock23(loop="while")
+    assert step_loop(reverse) == "checkpointed"
+    assert step_loop(forward) == "lax"
+    assert step_loop(diffrax.DirectAdjoint()) == "scan"
+
+
+def test_solving_traces_the_vector_field_once():
+    """A jitted vector field is traced once per solve: diffrax's check of the term, the
+    solver's state and its steps all call it alike (a Python float in ``args`` is static to
+    the ``jit``, so a shape evaluation that made it abstract would trace it anew)."""
+    traces = []
+
+    @eqx.filter_jit
+    def field(t, y, mu):
+        traces.append(1)
+        return _van_der_pol(t, y, mu)
+
+    sol = diffrax.diffeqsolve(
+        diffrax.ODETerm(field),
+        Rosenbrock23(jacobian="differences", reuse=5),
+        0.0,
+        1.0,
+        None,
+        (jnp.array(2.0), jnp.array(0.0)),
+        args=20.0,
+        stepsize_controller=diffrax.PIDController(rtol=1e-6, atol=1e-8),
+    )
+    assert sol.result == diffrax.RESULTS.successful
+    assert len(traces) == 1
 
 
 @pytest.mark.slow  # jax.jacfwd of the whole vector field compiles for tens of seconds

@@ -123,7 +123,7 @@ def _check_rest_modes(scene: Scene, dtype, eigenvalues) -> None:
         )
 
 
-@jit  # run once per scene: the statics' compile options (pacjax._jit)
+@jit(once=True)  # run once per scene (pacjax._jit)
 def _rest_eigenvalues(scene: Scene, dtype):
     q = scene.zeros(dtype)
     stiffness = jax.hessian(scene.elastic_energy)(q)

@@ -40,9 +40,13 @@ XLA compiles each copy of the vector field in a program anew, and on pacjax's dy
 copy is several seconds of a first simulation's compile time. A step therefore evaluates every
 vector field it needs in one loop, one pass each: ``F0`` where it is not known (the first step,
 after a jump; under ``vmap`` when any row needs it), the Jacobian's forward differences where
-one is made (one pass a column, from ``F0``), then the two stages'. Passes with nothing to do
-are skipped, so a step with a held Jacobian runs two vector fields, and the program holds one
-copy.
+one is made (one pass a column, from ``F0``), then the two stages'. The program holds one
+copy, and the loop makes only the passes needed: a step with a held Jacobian makes two. How it
+loops depends on how it is differentiated (``Rosenbrock23.loop``): in reverse mode it is
+equinox's checkpointed while loop, in forward mode a plain one (which reverse mode cannot
+differentiate, and the checkpointed one forward mode cannot), and under an adjoint that needs
+both a scan over every pass with the idle ones skipped by a ``cond``; a held-Jacobian step then
+still visits the twenty-odd idle passes, about a third of its time.
 
 A held ``J`` ages as the state moves, and the error estimate feels it: with ``J`` not the
 Jacobian the estimate's leading term is of second order, ``(J - df/dy)`` applied along the
@@ -94,6 +98,12 @@ class Rosenbrock23(diffrax.AbstractAdaptiveSolver):
             moves the body less than its size suggests (the plane angle of a nearly straight
             segment, :func:`pacjax._dynamics.equations.plane_angle_weights`) is held less
             tightly. None: every coordinate as it is.
+        loop: the step's loop of vector fields (see the module): ``"checkpointed"`` makes
+            only the passes needed and is reverse-mode differentiable
+            (``equinox.internal.while_loop``; diffrax's ``RecursiveCheckpointAdjoint``), not
+            forward-mode; ``"lax"`` the same passes, forward-mode only (``ForwardMode``);
+            ``"scan"`` visits every pass, skipping the idle ones, either mode.
+            :func:`pacjax.simulate` sets it from its adjoint.
     """
 
     term_structure: ClassVar = diffrax.AbstractTerm
@@ -105,12 +115,17 @@ class Rosenbrock23(diffrax.AbstractAdaptiveSolver):
     reuse: int = eqx.field(static=True, default=1)
     secant: bool = eqx.field(static=True, default=True)
     error_weight: Callable | None = eqx.field(static=True, default=None)
+    loop: str = eqx.field(static=True, default="checkpointed")
 
     def __check_init__(self):
         if isinstance(self.jacobian, str) and self.jacobian != "differences":
             raise ValueError(
                 f'Rosenbrock23.jacobian must be callable, None or "differences", '
                 f"got {self.jacobian!r}"
+            )
+        if self.loop not in ("checkpointed", "lax", "scan"):
+            raise ValueError(
+                f'Rosenbrock23.loop must be "checkpointed", "lax" or "scan", got {self.loop!r}'
             )
         if not (isinstance(self.reuse, int) and self.reuse >= 1):
             raise ValueError(f"Rosenbrock23.reuse must be an integer >= 1, got {self.reuse!r}")
@@ -130,7 +145,9 @@ class Rosenbrock23(diffrax.AbstractAdaptiveSolver):
         if self.reuse == 1:
             return terms.vf(t0, y0, args)
         x0, _ = ravel_pytree(y0)
-        shape = jax.eval_shape(terms.vf, t0, y0, args)
+        # equinox's, not jax's: jax's makes every leaf of ``args`` abstract, and a jitted vector
+        # field would be traced anew for it (its Python scalars are static to the jit).
+        shape = eqx.filter_eval_shape(terms.vf, t0, y0, args)
         f0 = jax.tree.map(lambda leaf: jnp.zeros(leaf.shape, leaf.dtype), shape)
         held = jnp.zeros((x0.size, x0.size), x0.dtype)
         return f0, held, jnp.asarray(self.reuse, jnp.int32), jnp.asarray(False)
@@ -152,30 +169,7 @@ class Rosenbrock23(diffrax.AbstractAdaptiveSolver):
         def f(t, x):
             return ravel_pytree(terms.vf(t, unravel(x), args))[0]
 
-        h = t1 - t0
-        differences = self.jacobian == "differences"
-        if self.reuse == 1:
-            f0_tree, held, age, fresh = solver_state, None, None, True
-            # ``known is True`` resolves when traced: no start's vector field in the loop.
-            known = True if made_jump is False else ~jnp.asarray(made_jump)
-            jac = None if differences else self._given_jacobian(t0, y0, args, f)
-        else:
-            f0_tree, held, age, known = solver_state
-            known = known & ~jnp.asarray(made_jump)
-            fresh = (age >= self.reuse) | jnp.asarray(made_jump)
-            # Under vmap the rows make their Jacobians together, when any row still stepping
-            # needs one (a finished row steps from its end to its end): a choice by each row's
-            # own flag would be a select, both sides every step.
-            fresh = eqxi.unvmap_any(fresh & (t1 > t0))
-            if differences:
-                jac = held
-            else:
-                jac = jax.lax.cond(
-                    fresh, lambda: self._given_jacobian(t0, y0, args, f), lambda: held
-                )
-            age = jnp.where(fresh, 0, age) + 1
-        if jac is None:
-            jac = jnp.zeros((x0.size, x0.size), x0.dtype)
+        f0_tree, jac, age, known, fresh = self._start(f, t0, t1, y0, args, solver_state, made_jump)
         # Neither W nor T carry gradients: the step's derivative is that of the method with W
         # held fixed, a W-method's own (diffrax's implicit solvers stop them the same way).
         jac = jax.lax.stop_gradient(jac)
@@ -184,88 +178,155 @@ class Rosenbrock23(diffrax.AbstractAdaptiveSolver):
         else:
             rate = jax.jvp(lambda t: f(t, x0), (t0,), (jnp.ones_like(t0),))[1]
             rate = jax.lax.stop_gradient(rate)
-        hdt = (h * _D) * rate
-        f0_known = ravel_pytree(f0_tree)[0]
-        columns = x0.size if differences else 0
-        steps = difference_steps(x0)
-        eye = jnp.eye(x0.size, dtype=x0.dtype)
-
-        # Every vector field of a step is one pass of one loop, so that the compiled program
-        # holds one copy of the vector field (XLA compiles each copy anew): the start's where
-        # it is not known (the first step, after a jump), the Jacobian's differences where one
-        # is made, then the two stages'. A pass makes its point, evaluates the vector field
-        # there, and takes what it gives; a pass with nothing to do is skipped. ``lu`` is
-        # ``W``'s factorisation, made before the first stage.
-        def point(phase, i, c):
-            def start(c):
-                return t0, x0, c
-
-            def difference(c):
-                return t0, x0.at[i - 1].add(steps[i - 1]), c
-
-            def first_stage(c):
-                lu = jax.scipy.linalg.lu_factor(eye - (h * _D) * c["jac"])
-                k1 = jax.scipy.linalg.lu_solve(lu, c["f0"] + hdt)
-                return t0 + 0.5 * h, x0 + (0.5 * h) * k1, dict(c, lu=lu, k1=k1)
-
-            def second_stage(c):
-                k2 = jax.scipy.linalg.lu_solve(c["lu"], c["f1"] - c["k1"]) + c["k1"]
-                return t1, x0 + h * k2, dict(c, k2=k2)
-
-            return jax.lax.switch(phase, [start, difference, first_stage, second_stage], c)
-
-        def take(phase, i, fx, c):
-            def start(c):
-                return dict(c, f0=jnp.where(known, c["f0"], fx))
-
-            def difference(c):
-                column = jax.lax.stop_gradient((fx - c["f0"]) / steps[i - 1])
-                return dict(c, jac=c["jac"].at[:, i - 1].set(column))
-
-            def first_stage(c):
-                return dict(c, f1=fx)
-
-            def second_stage(c):
-                rhs = fx - _E32 * (c["k2"] - c["f1"]) - 2.0 * (c["k1"] - c["f0"]) + hdt
-                return dict(c, f2=fx, k3=jax.scipy.linalg.lu_solve(c["lu"], rhs))
-
-            return jax.lax.switch(phase, [start, difference, first_stage, second_stage], c)
-
-        def one_pass(c, i):
-            phase = jnp.select([i == 0, i <= columns, i == columns + 1], [0, 1, 2], 3)
-            needed = jnp.select(
-                [i == 0, i <= columns],
-                [jnp.asarray(False) if known is True else eqxi.unvmap_any(~known), fresh],
-                True,
-            )
-
-            def evaluate(c):
-                t, x, c = point(phase, i, c)
-                return take(phase, i, f(t, x), c)
-
-            return jax.lax.cond(needed, evaluate, lambda c: c, c), None
-
-        zero = jnp.zeros_like(x0)
-        lu = (jnp.zeros_like(eye), jnp.zeros(x0.size, jnp.int32))
-        carry = dict(f0=f0_known, jac=jac, lu=lu, k1=zero, k2=zero, f1=zero, f2=zero, k3=zero)
-        passes = jnp.arange(1 if known is True else 0, columns + 3)
-        c, _ = jax.lax.scan(one_pass, carry, passes)
+        columns = x0.size if self.jacobian == "differences" else 0
+        passes = _Passes(f, t0, t1, x0, (t1 - t0) * _D * rate, columns, known, fresh)
+        c = passes.run(ravel_pytree(f0_tree)[0], jac, self.loop)
         f0, k1, k2, k3, f2 = c["f0"], c["k1"], c["k2"], c["k3"], c["f2"]
+        h = t1 - t0
         x1 = x0 + h * k2
-        f2_tree = unravel(f2)
         error = unravel((h / 6.0) * (k1 - 2.0 * k2 + k3))
         if self.error_weight is not None:
             weight = jax.lax.stop_gradient(self.error_weight(y0, args))
             error = jax.tree.map(jnp.multiply, error, weight)
         y1 = unravel(x1)
         dense_info = dict(y0=y0, y1=y1, k0=unravel(h * f0), k1=unravel(h * f2))
-        if held is None:
-            return y1, error, dense_info, f2_tree, diffrax.RESULTS.successful
+        if age is None:
+            return y1, error, dense_info, unravel(f2), diffrax.RESULTS.successful
         jac = c["jac"]
         if self.secant:
             jac = secant_update(jac, x1 - x0, f2 - f0)
-        state = (f2_tree, jac, age, jnp.asarray(True))
+        state = (unravel(f2), jac, age, jnp.asarray(True))
         return y1, error, dense_info, state, diffrax.RESULTS.successful
+
+    def _start(self, f, t0, t1, y0, args, solver_state, made_jump):
+        """What a step starts from: the start's vector field (as held; a pytree like ``y0``),
+        the Jacobian (the held one where differences will replace it), the accepted steps it
+        will have served after this one (None without reuse), whether the start's vector field
+        is known (``True`` when that is known at trace time) and whether a Jacobian is made
+        (unbatched)."""
+        x0, _ = ravel_pytree(y0)
+        differences = self.jacobian == "differences"
+        if self.reuse == 1:
+            # ``known is True`` resolves when traced: no start's vector field in the loop.
+            known = True if made_jump is False else ~jnp.asarray(made_jump)
+            if differences:
+                jac = jnp.zeros((x0.size, x0.size), x0.dtype)
+            else:
+                jac = self._given_jacobian(t0, y0, args, f)
+            return solver_state, jac, None, known, True
+        f0_tree, held, age, known = solver_state
+        known = known & ~jnp.asarray(made_jump)
+        fresh = (age >= self.reuse) | jnp.asarray(made_jump)
+        # Under vmap the rows make their Jacobians together, when any row still stepping
+        # needs one (a finished row steps from its end to its end): a choice by each row's
+        # own flag would be a select, both sides every step.
+        fresh = eqxi.unvmap_any(fresh & (t1 > t0))
+        if differences:
+            jac = held
+        else:
+            jac = jax.lax.cond(fresh, lambda: self._given_jacobian(t0, y0, args, f), lambda: held)
+        return f0_tree, jac, jnp.where(fresh, 0, age) + 1, known, fresh
+
+
+class _Passes:
+    """A step's loop of vector fields (see the module): pass 0 evaluates the start's, passes
+    ``1..columns`` the Jacobian's forward differences (one column each), pass ``columns + 1``
+    the first stage's and ``columns + 2`` the second's. A pass makes its point, evaluates the
+    vector field there and takes what it gives into the loop's carry; ``lu`` is ``W``'s
+    factorisation, made before the first stage.
+
+    ``known``: whether the start's vector field is known (``True`` when that is known at trace
+    time: no pass 0); ``fresh``: whether a Jacobian is made (unbatched, as ``known``'s use is:
+    under ``vmap`` every row makes the passes any row needs, so the loop's index stays
+    unbatched and each pass evaluates one vector field, not every branch's)."""
+
+    def __init__(self, f, t0, t1, x0, hdt, columns: int, known, fresh):
+        self.f, self.t0, self.t1, self.x0, self.hdt = f, t0, t1, x0, hdt
+        self.h = t1 - t0
+        self.columns, self.known, self.fresh = columns, known, jnp.asarray(fresh)
+        self.steps = difference_steps(x0)
+        self.eye = jnp.eye(x0.size, dtype=x0.dtype)
+
+    def run(self, f0, jac, loop: str) -> dict:
+        """The carry after every pass needed (``loop``: :class:`Rosenbrock23`'s)."""
+        zero = jnp.zeros_like(self.x0)
+        lu = (jnp.zeros_like(self.eye), jnp.zeros(self.x0.size, jnp.int32))
+        carry = dict(f0=f0, jac=jac, lu=lu, k1=zero, k2=zero, f1=zero, f2=zero, k3=zero)
+        end = self.columns + 3
+        if loop == "scan":
+            # Every pass visited, the idle ones skipped by a cond: differentiable either way.
+            def scan_pass(c, i):
+                return jax.lax.cond(self.needed(i), lambda c: self.one(c, i), lambda c: c, c), None
+
+            first = 1 if self.known is True else 0
+            return jax.lax.scan(scan_pass, carry, jnp.arange(first, end))[0]
+        first = jnp.where(self.needed(0), 0, self.following(0))
+        _, c = eqxi.while_loop(
+            lambda ic: ic[0] < end,
+            lambda ic: (self.following(ic[0]), self.one(ic[1], ic[0])),
+            (first, carry),
+            max_steps=end,
+            checkpoints=end,
+            kind=loop,
+        )
+        return c
+
+    def needed(self, i):
+        """Whether pass ``i`` has something to do."""
+        start = jnp.asarray(False) if self.known is True else eqxi.unvmap_any(~self.known)
+        return jnp.select([i == 0, i <= self.columns], [start, self.fresh], True)
+
+    def following(self, i):
+        """The pass needed after pass ``i``: the next, past the differences where no
+        Jacobian is made."""
+        return jnp.where((i + 1 <= self.columns) & ~self.fresh, self.columns + 1, i + 1)
+
+    def one(self, c, i):
+        phase = jnp.select([i == 0, i <= self.columns, i == self.columns + 1], [0, 1, 2], 3)
+        t, x, c = jax.lax.switch(phase, self._points, i, c)
+        return jax.lax.switch(phase, self._takes, i, self.f(t, x), c)
+
+    @property
+    def _points(self):
+        """Per phase: ``(i, c) -> (t, x, c)``, where pass ``i`` evaluates."""
+        t0, x0, h = self.t0, self.x0, self.h
+
+        def start(i, c):
+            return t0, x0, c
+
+        def difference(i, c):
+            return t0, x0.at[i - 1].add(self.steps[i - 1]), c
+
+        def first_stage(i, c):
+            lu = jax.scipy.linalg.lu_factor(self.eye - (h * _D) * c["jac"])
+            k1 = jax.scipy.linalg.lu_solve(lu, c["f0"] + self.hdt)
+            return t0 + 0.5 * h, x0 + (0.5 * h) * k1, dict(c, lu=lu, k1=k1)
+
+        def second_stage(i, c):
+            k2 = jax.scipy.linalg.lu_solve(c["lu"], c["f1"] - c["k1"]) + c["k1"]
+            return self.t1, x0 + h * k2, dict(c, k2=k2)
+
+        return [start, difference, first_stage, second_stage]
+
+    @property
+    def _takes(self):
+        """Per phase: ``(i, fx, c) -> c``, what pass ``i`` takes from its vector field."""
+
+        def start(i, fx, c):
+            return dict(c, f0=jnp.where(self.known, c["f0"], fx))
+
+        def difference(i, fx, c):
+            column = jax.lax.stop_gradient((fx - c["f0"]) / self.steps[i - 1])
+            return dict(c, jac=c["jac"].at[:, i - 1].set(column))
+
+        def first_stage(i, fx, c):
+            return dict(c, f1=fx)
+
+        def second_stage(i, fx, c):
+            rhs = fx - _E32 * (c["k2"] - c["f1"]) - 2.0 * (c["k1"] - c["f0"]) + self.hdt
+            return dict(c, f2=fx, k3=jax.scipy.linalg.lu_solve(c["lu"], rhs))
+
+        return [start, difference, first_stage, second_stage]
 
 
 def secant_update(jac, dy, df):

@@ -319,7 +319,7 @@ def _check_damping(scene: Scene, damping, dtype) -> Damping:
     return jax.tree.map(lambda x: x.astype(dtype) if eqx.is_inexact_array(x) else x, damping)
 
 
-@jit  # run once per simulation: the statics' compile options (pacjax._jit)
+@jit(once=True)  # run once per simulation (pacjax._jit)
 def aligned_rest_start(scene: Scene, controls, q0, qdot0, t0):
     """``q0`` with the bending plane of each straight PCC/PAC segment at rest turned to the
     force on it at ``t0`` (:meth:`pacjax._statics.problem.ScaledProblem.aligned`).
@@ -441,6 +441,17 @@ def default_solver(rtol: float) -> diffrax.AbstractSolver:
 _TRACED_VECTOR_FIELD = eqx.filter_jit(vector_field)
 
 
+def step_loop(adjoint) -> str:
+    """:class:`Rosenbrock23`'s ``loop`` for a diffrax adjoint: diffrax's checkpointed one
+    differentiates each step in reverse mode, ``ForwardMode`` in forward mode (which a
+    checkpointed loop does not support), and the others either way."""
+    if isinstance(adjoint, diffrax.RecursiveCheckpointAdjoint):
+        return "checkpointed"
+    if isinstance(adjoint, diffrax.ForwardMode):
+        return "lax"
+    return "scan"
+
+
 @eqx.filter_jit
 def integrate(scene, damping, controls, q0, qdot0, span, ts, dt0, opts: _Options):
     """The compiled simulation of checked inputs (:func:`prepare`, :func:`aligned_rest_start`):
@@ -450,6 +461,9 @@ def integrate(scene, damping, controls, q0, qdot0, span, ts, dt0, opts: _Options
     if isinstance(solver, Rosenbrock23) and not callable(controls):
         # Constant controls: the vector field does not depend on time (no T term to trace).
         solver = dataclasses.replace(solver, autonomous=True)
+    if isinstance(solver, Rosenbrock23):
+        # The step's loop as the adjoint differentiates it (see Rosenbrock23.loop).
+        solver = dataclasses.replace(solver, loop=step_loop(opts.adjoint))
     sol = diffrax.diffeqsolve(
         diffrax.ODETerm(_TRACED_VECTOR_FIELD),
         solver,
