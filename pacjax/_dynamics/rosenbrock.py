@@ -178,11 +178,11 @@ class Rosenbrock23(diffrax.AbstractAdaptiveSolver):
         else:
             rate = jax.jvp(lambda t: f(t, x0), (t0,), (jnp.ones_like(t0),))[1]
             rate = jax.lax.stop_gradient(rate)
+        h = t1 - t0
         columns = x0.size if self.jacobian == "differences" else 0
-        passes = _Passes(f, t0, t1, x0, (t1 - t0) * _D * rate, columns, known, fresh)
+        passes = _Passes(f, t0, t1, x0, h * _D * rate, columns, known, fresh)
         c = passes.run(ravel_pytree(f0_tree)[0], jac, self.loop)
         f0, k1, k2, k3, f2 = c["f0"], c["k1"], c["k2"], c["k3"], c["f2"]
-        h = t1 - t0
         x1 = x0 + h * k2
         error = unravel((h / 6.0) * (k1 - 2.0 * k2 + k3))
         if self.error_weight is not None:
