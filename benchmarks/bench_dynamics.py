@@ -17,8 +17,8 @@ largest distance of the tip from a reference run at ``--reference-rtol``
 (``--reference-solver``; the same method 10^3 times tighter converges on the exact motion, and
 Kvaerno5 is checked against it) over 11 save times. The batch: ``pj.simulate_batch`` of
 ``--batch`` step commands (each a pull of up to 40 mm on one random tendon) with its default
-solver (``--rows-at-once``: rows vectorised together; default one at a time on a CPU, two
-threads side by side), its aggregate real-time factor ``batch * simulated time / warm wall
+solver (``--rows-at-once``: rows vectorised together; default one at a time on a CPU, a
+thread a core side by side), its aggregate real-time factor ``batch * simulated time / warm wall
 time``. Nothing is asserted.
 """
 

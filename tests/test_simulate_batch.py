@@ -56,3 +56,29 @@ def test_batch_arguments_are_checked_before_compiling():
         pj.simulate_batch(SCENE, (0.0, 0.01), COMMANDS, rows_at_once=0)
     with pytest.raises(TypeError, match="rows_at_once"):
         pj.simulate_batch(SCENE, (0.0, 0.01), COMMANDS, rows_at_once=2.5)
+
+
+def test_rows_side_by_side_take_a_thread_a_core(monkeypatch):
+    """On a CPU the rows run in as many threads as the process has cores (each row's kernels
+    run on one thread), never more threads than rows."""
+    from pacjax._dynamics import batch
+
+    monkeypatch.setattr(batch.os, "sched_getaffinity", lambda pid: {0, 2, 5}, raising=False)
+    assert batch.cpu_lanes() == 3
+    workers = []
+    real = batch.ThreadPoolExecutor
+
+    def spy(max_workers):
+        workers.append(max_workers)
+        return real(max_workers=max_workers)
+
+    monkeypatch.setattr(batch, "ThreadPoolExecutor", spy)
+    monkeypatch.setattr(batch, "_one_row", lambda *args: jnp.zeros(2))
+    args = (SCENE, None, None, (np.zeros((5, 2)), np.zeros((5, 3))), None, None, None, None)
+    out = batch._rows_side_by_side(*args, rows=5)
+    assert out.shape == (5, 2) and workers == [3]
+    batch._rows_side_by_side(*args, rows=2)
+    assert workers == [3, 2]
+    monkeypatch.delattr(batch.os, "sched_getaffinity", raising=False)
+    monkeypatch.setattr(batch.os, "cpu_count", lambda: 6)
+    assert batch.cpu_lanes() == 6

@@ -3,6 +3,7 @@ simulate`'s program over rows, vectorised a group of rows at a time (all of them
 accelerator or over several devices, one at a time on a CPU, where each core takes rows as it
 finishes one)."""
 
+import os
 from concurrent.futures import ThreadPoolExecutor
 
 import diffrax
@@ -16,7 +17,7 @@ from .._model.inertia import PHI_INERTIA_FACTOR
 from .._model.inputs import check_q, check_scene, solver_dtype
 from .._model.scene import Scene
 from .._statics.batch import check_devices, row_sharding
-from .._statics.pool import CPU_LANES, pad_rows
+from .._statics.pool import pad_rows
 from .damping import Damping
 from .simulate import (
     ATOL,
@@ -70,11 +71,11 @@ def simulate_batch(
             row that needs most, and the rows make their held Jacobians together (when one
             needs it), so a row's steps differ slightly from its own simulation's; one row at
             a time keeps :func:`simulate`'s solver and its own steps, and on a single CPU
-            device :data:`pacjax._statics.pool.CPU_LANES` threads
-            run the one compiled row side by side, each taking the next row when it finishes
-            one. Default: one on a CPU, where vectorising small rows costs more per row than
-            running them one after another, and all rows on an accelerator or when the rows
-            are split over several devices.
+            device a thread a core (:func:`cpu_lanes`) runs the one compiled row side by
+            side, each thread taking the next row when it finishes one. Default: one on a
+            CPU, where vectorising small rows costs more per row than running them one after
+            another, and all rows on an accelerator or when the rows are split over several
+            devices.
         solver: as in :func:`simulate`.
         Everything else as in :func:`simulate` (no dense output).
 
@@ -149,7 +150,7 @@ def simulate_batch(
 
 
 def _side_by_side(group: int, sharding, args) -> bool:
-    """Whether rows one at a time run in :data:`CPU_LANES` threads: on a single CPU device,
+    """Whether rows one at a time run in :func:`cpu_lanes` threads: on a single CPU device,
     where one simulation keeps one core busy (its kernels are small), and not under a
     transformation (a tracer belongs to the thread that traces)."""
     traced = any(isinstance(x, jax.core.Tracer) for x in jtu.tree_leaves(args))
@@ -160,7 +161,7 @@ def _rows_side_by_side(scene, damping, schedule, batched, span, ts, dt0, opts, r
     """The first ``rows`` rows of ``batched``, each simulated as :func:`simulate` runs it (its
     start's alignment, then :func:`integrate`: the same compiled programs, so a batch after a
     simulation of the scene, or a simulation after a batch, compiles nothing), by
-    :data:`CPU_LANES` threads that each take the next row as they finish one (rows differ in
+    :func:`cpu_lanes` threads that each take the next row as they finish one (rows differ in
     their steps, so halves fixed in advance would leave a core idle). A call a row, not a
     ``lax.map``: XLA:CPU ran a map over one row several times slower than the row alone
     (``benchmarks/RESULTS.md``, "Simulation batches side by side")."""
@@ -171,9 +172,20 @@ def _rows_side_by_side(scene, damping, schedule, batched, span, ts, dt0, opts, r
         return _one_row(scene, damping, schedule, row, span, ts, dt0, opts)
 
     first = run(0)  # compiles the programs (or finds them) before the threads share them
-    with ThreadPoolExecutor(max_workers=min(CPU_LANES, rows)) as lanes:
+    with ThreadPoolExecutor(max_workers=min(cpu_lanes(), rows)) as lanes:
         trajs = [first, *lanes.map(run, range(1, rows))]
     return jtu.tree_map(lambda *xs: jnp.stack(xs), *trajs)
+
+
+def cpu_lanes() -> int:
+    """Rows that run side by side on a CPU: one a core this process may run on. A row's
+    kernels are small and run on one thread, so each core takes a row; more threads than
+    cores cost nothing measurable (``benchmarks/RESULTS.md``, "Simulation batches: a row a
+    core")."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # no affinity on this platform (macOS, Windows)
+        return os.cpu_count() or 1
 
 
 def _rows_at_once(rows_at_once: int | None, rows: int) -> int:
