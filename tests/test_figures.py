@@ -12,6 +12,7 @@ from types import SimpleNamespace
 
 import jax.numpy as jnp
 import matplotlib
+import matplotlib.animation
 import numpy as np
 import pytest
 from matplotlib.collections import Collection
@@ -284,6 +285,38 @@ def test_tip_plot_follows_the_dense_output_and_labels_every_line(single):
         (curve,) = [a for a in lines if a.get_label() == "simulated tip"]
         assert len(curve.get_xdata()) >= 100
         assert curve.get_xdata()[-1] == pytest.approx(0.2)
+
+
+class _Frames(matplotlib.animation.AbstractMovieWriter):
+    """A movie writer that keeps where each frame's panels were drawn (figure fractions)."""
+
+    def setup(self, fig, outfile, dpi=None):
+        super().setup(fig, outfile, dpi)
+        self.frames = []
+
+    def grab_frame(self, **savefig_kwargs):
+        self.fig.savefig(io.BytesIO(), format="rgba", dpi=self.dpi)
+        self.frames.append([ax.get_position().bounds for ax in self.fig.axes])
+
+    def finish(self):
+        pass
+
+
+def test_animation_frames_are_laid_out_as_each_frame_alone(single):
+    """The animation lays out its first frame and holds that layout: each frame's panels sit
+    where that frame laid out on its own puts them."""
+    scene, _ = single
+    trajectory = _trajectory(scene, 0.2, 3)
+    writer = _Frames(fps=20)
+    fig, draw, n_frames = animation.animation_frames(scene, trajectory, title="x")
+    animation.write_frames(fig, draw, n_frames, writer, "unused.gif", dpi=80)
+    assert len(writer.frames) == n_frames and fig.get_layout_engine() is None
+    for k in range(n_frames):
+        alone, draw_alone, _ = animation.animation_frames(scene, trajectory, title="x")
+        draw_alone(k)
+        alone.savefig(io.BytesIO(), format="rgba", dpi=80)
+        expected = [ax.get_position().bounds for ax in alone.axes]
+        np.testing.assert_allclose(writer.frames[k], expected, rtol=0, atol=1e-12)
 
 
 def test_animation_panels_keep_apart(single):

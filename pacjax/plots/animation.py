@@ -8,8 +8,9 @@ from __future__ import annotations
 
 import os
 
+import matplotlib
 import numpy as np
-from matplotlib.animation import FFMpegWriter, FuncAnimation, PillowWriter
+from matplotlib.animation import FFMpegWriter, PillowWriter
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
@@ -111,9 +112,28 @@ def animate_trajectory(
     if fps < 1:
         raise ValueError(f"fps must be >= 1, got {fps}")
     fig, draw, n_frames = animation_frames(scene, trajectory, title=title, views=views)
-    anim = FuncAnimation(fig, draw, frames=n_frames, blit=False)
     writer = PillowWriter(fps=fps) if ext == ".gif" else FFMpegWriter(fps=fps)
-    anim.save(path, writer=writer, dpi=80)
+    write_frames(fig, draw, n_frames, writer, path, dpi=80)
+
+
+def write_frames(fig: Figure, draw, n_frames: int, writer, path, dpi: int) -> None:
+    """Draw frames ``0 .. n_frames - 1`` and hand each to ``writer`` (a matplotlib movie
+    writer), drawing the figure once a frame.
+
+    The panels' limits are the whole motion's (:func:`animation_frames`), so the first frame's
+    constrained layout is every frame's: it is computed once and then held. (Matplotlib's
+    ``FuncAnimation`` drew every frame three times, its layout twice.)"""
+    with writer.saving(fig, os.fspath(path), dpi):
+        for k in range(n_frames):
+            draw(k)
+            writer.grab_frame()
+            if k == 0:
+                # No engine at all: a figure with one (even "none"'s placeholder) is drawn
+                # twice by each savefig.
+                with matplotlib.rc_context(
+                    {"figure.autolayout": False, "figure.constrained_layout.use": False}
+                ):
+                    fig.set_layout_engine(None)
 
 
 def animation_frames(scene: Scene, trajectory: Trajectory, *, title=None, views=("3d", "xz")):
