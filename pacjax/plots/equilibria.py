@@ -159,16 +159,21 @@ def _project(p, idx) -> list[np.ndarray]:
 
 def _draw_rings(ax, d: Drawn, idx, color) -> None:
     """Cross-section rings: the base ring dark and thick, segment ends in the case's colour,
-    the others faint (so that the tube reads as a tube without hiding the backbone)."""
+    the others faint (so that the tube reads as a tube without hiding the backbone). The rings
+    of one style are one line, broken between rings (a row of NaN): a line each made the
+    rings most of an animation frame's artists."""
+    styles = {
+        "base": dict(color="0.25", lw=2.2, alpha=0.9),
+        "end": dict(color=color, lw=1.0, alpha=0.7),
+        "faint": dict(color="0.55", lw=0.5, alpha=0.3),
+    }
+    rings = {name: [] for name in styles}
     for i in d.ring_index:
-        boundary = i in d.boundary_index
-        ax.plot(
-            *_project(d.ring(i), idx),
-            color="0.25" if i == 0 else (color if boundary else "0.55"),
-            lw=2.2 if i == 0 else (1.0 if boundary else 0.5),
-            alpha=0.9 if i == 0 else (0.7 if boundary else 0.3),
-            zorder=1,
-        )
+        name = "base" if i == 0 else ("end" if i in d.boundary_index else "faint")
+        rings[name] += [d.ring(i), np.full((1, 3), np.nan)]
+    for name, parts in rings.items():
+        if parts:
+            ax.plot(*_project(np.concatenate(parts[:-1]), idx), zorder=1, **styles[name])
 
 
 def _hollow_points(ax, coordinates, marker: str, size: float, label: str, zorder: int) -> None:
