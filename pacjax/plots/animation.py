@@ -121,8 +121,9 @@ def write_frames(fig: Figure, draw, n_frames: int, writer, path, dpi: int) -> No
     writer), drawing the figure once a frame.
 
     The panels' limits are the whole motion's (:func:`animation_frames`), so the first frame's
-    constrained layout is every frame's: it is computed once and then held. (Matplotlib's
-    ``FuncAnimation`` drew every frame three times, its layout twice.)"""
+    constrained layout is every frame's: it is computed once and then held. (Not matplotlib's
+    ``FuncAnimation``: on an Agg canvas it draws each frame three times and lays it out
+    twice.)"""
     with writer.saving(fig, os.fspath(path), dpi):
         for k in range(n_frames):
             draw(k)

@@ -160,8 +160,8 @@ def _project(p, idx) -> list[np.ndarray]:
 def _draw_rings(ax, d: Drawn, idx, color) -> None:
     """Cross-section rings: the base ring dark and thick, segment ends in the case's colour,
     the others faint (so that the tube reads as a tube without hiding the backbone). The rings
-    of one style are one line, broken between rings (a row of NaN): a line each made the
-    rings most of an animation frame's artists."""
+    of one style are one line, broken between rings (a row of NaN), so that an animation
+    frame, which draws them anew, has three artists of them rather than one a ring."""
     styles = {
         "base": dict(color="0.25", lw=2.2, alpha=0.9),
         "end": dict(color=color, lw=1.0, alpha=0.7),
